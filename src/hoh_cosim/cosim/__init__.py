@@ -1,0 +1,1 @@
+"""Co-simulation: scenarios, the fmpy master, the in-process engine, recorder, metrics and plots."""
