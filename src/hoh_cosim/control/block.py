@@ -1,0 +1,81 @@
+"""The block contract (DESIGN.md §4): named vector ports with sizes and units, `reset()`, `step()`.
+
+A block keeps its parameters in a frozen, validated dataclass and its state explicit. It never reads a
+clock, sleeps, does I/O or knows FMI: `step(t, dt, inputs)` gets the master's time (an integer tick
+times dt) and a mapping from input port names to float arrays, and returns the outputs the same way.
+The FMU wrappers, the in-process engine and the hardware runner are adapters of that one shape.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar, Protocol
+
+import numpy as np
+
+from hoh_cosim.control.vectors import Vec
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["WRENCH_UNITS", "Block", "Port", "check_inputs", "zero_inputs"]
+
+WRENCH_UNITS = ("N", "N", "N", "N.m", "N.m", "N.m")
+
+
+@dataclass(frozen=True)
+class Port:
+    """One vector port of `size` scalars.
+
+    `unit` is one SI unit string for every element, or one per element (a wrench is N, N, N, N.m,
+    N.m, N.m). Units are plain ASCII as FMI tools expect: 'N.m', 'm/s', 'rad/s', '1' for none.
+    """
+
+    name: str
+    size: int
+    unit: str | tuple[str, ...]
+    description: str
+
+    def __post_init__(self) -> None:
+        if isinstance(self.unit, tuple) and len(self.unit) != self.size:
+            raise ConfigError(f"port {self.name}: {len(self.unit)} units for {self.size} values")
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """The unit of every element."""
+        return self.unit if isinstance(self.unit, tuple) else (self.unit,) * self.size
+
+
+class Block(Protocol):
+    inputs: ClassVar[tuple[Port, ...]]
+    outputs: ClassVar[tuple[Port, ...]]
+
+    def reset(self) -> None: ...
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]: ...
+
+
+def check_inputs(block: Block, inputs: Mapping[str, object]) -> dict[str, Vec]:
+    """`inputs` as float arrays, checked against the block's ports: every port present, sizes right,
+    nothing unknown. For adapters and tests; blocks do not re-check in their hot path."""
+    known = {p.name: p for p in block.inputs}
+    unknown = sorted(set(inputs) - set(known))
+    if unknown:
+        raise ConfigError(
+            f"{type(block).__name__}: unknown input port {unknown[0]!r} (ports: {', '.join(known)})"
+        )
+    out: dict[str, Vec] = {}
+    for name, port in known.items():
+        if name not in inputs:
+            raise ConfigError(f"{type(block).__name__}: input port {name!r} is missing")
+        value = np.asarray(inputs[name], dtype=np.float64).reshape(-1)
+        if value.size != port.size:
+            raise ConfigError(
+                f"{type(block).__name__}.{name}: expected {port.size} values, got {value.size}"
+            )
+        out[name] = value
+    return out
+
+
+def zero_inputs(block: Block) -> dict[str, Vec]:
+    """A zero array for every input port of `block`."""
+    return {p.name: np.zeros(p.size) for p in block.inputs}

@@ -1,0 +1,237 @@
+"""The hand-guiding controller block: estimated forces in, a speedL twist command out (seed 000, 3.F).
+
+Per tick:
+
+    checks     non-finite input (latched) · estimator not ready · stale FT-150 or probe data ·
+               probe force at the stop limit (latched)            → any of these: zero twist, stop flag
+    law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on); v = law(F̃) (eq. 10 or
+               an alternative), ω = law(τ_hand)
+    fixture    while |F_probe| > threshold no upward motion (3.F.3, if on)
+    limits     speed clamp · acceleration clamp · probe-force soft cap · workspace box
+
+The order puts the hard limits last: the soft force cap and the workspace box override the
+acceleration clamp, never the other way round. The output is a TCP twist [v; ω] in the base frame with
+UR speedL semantics, and a `Status` (see `hoh_cosim.control.limits`) whose `ok` the runner obeys.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from hoh_cosim.control.admittance import (
+    ROTATION_GAINS,
+    TRANSLATION_GAINS,
+    AdmittanceGains,
+    apply_law,
+    contact_compensated,
+    horizontal_fixture,
+)
+from hoh_cosim.control.block import Port
+from hoh_cosim.control.limits import (
+    STOP_FLAGS,
+    LimitParams,
+    Status,
+    clamp_acceleration,
+    clamp_speed,
+    is_stale,
+    probe_force_limit,
+    workspace_limit,
+)
+from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_vector, frozen
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["ControllerParams", "HandGuidingController"]
+
+_NONFINITE = int(Status.NONFINITE)
+_NOT_READY = int(Status.NOT_READY)
+_STALE_FT = int(Status.STALE_FT)
+_STALE_PROBE = int(Status.STALE_PROBE)
+_FORCE_STOP = int(Status.FORCE_STOP)
+_FIXTURE = int(Status.FIXTURE)
+_SPEED_CLAMPED = int(Status.SPEED_CLAMPED)
+_ACCEL_CLAMPED = int(Status.ACCEL_CLAMPED)
+_FORCE_SOFT_CAP = int(Status.FORCE_SOFT_CAP)
+_WORKSPACE = int(Status.WORKSPACE)
+_LATCHED = _FORCE_STOP | _NONFINITE
+_STOP = int(STOP_FLAGS)
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    translation: AdmittanceGains = TRANSLATION_GAINS
+    rotation: AdmittanceGains = ROTATION_GAINS
+    contact_compensation: bool = True  # eq. 11–12
+    virtual_fixture: bool = False  # 3.F.3
+    fixture_threshold_N: float = 1.0  # [N] contact force that engages the fixture
+    fixture_up_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 1.0]))  # unit, in B
+    limits: LimitParams = field(default_factory=LimitParams)
+    use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
+    ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
+    probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
+
+    def __post_init__(self) -> None:
+        up = as_vector(self.fixture_up_B, 3, "fixture_up_B")
+        n = math.sqrt(float(up @ up))
+        if n == 0.0:
+            raise ConfigError("fixture_up_B: expected a non-zero vector, got [0.0, 0.0, 0.0]")
+        object.__setattr__(self, "fixture_up_B", frozen(up / n))
+        object.__setattr__(
+            self,
+            "fixture_threshold_N",
+            as_scalar(self.fixture_threshold_N, "fixture_threshold_N", low=0.0),
+        )
+        for name in ("ft_period_s", "probe_period_s"):
+            object.__setattr__(
+                self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
+            )
+
+
+class HandGuidingController:
+    """Admittance, contact compensation, virtual fixture and limits under the block contract."""
+
+    inputs: ClassVar[tuple[Port, ...]] = (
+        Port("F_hand_B", 3, "N", "estimated external force on the tool (hand + contact), in B"),
+        Port("tau_hand_B", 3, "N.m", "estimated external torque on the tool, in B"),
+        Port("F_probe_B", 3, "N", "estimated contact force on the probe, in B"),
+        Port("ft_age", 1, "s", "time since the last FT-150 packet"),
+        Port("probe_age", 1, "s", "time since the last probe-sensor packet"),
+        Port("ready", 1, "1", "1 when the estimator's outputs are valid"),
+        Port("p_BT_B", 3, "m", "measured TCP position in the base frame"),
+    )
+    outputs: ClassVar[tuple[Port, ...]] = (
+        Port(
+            "twist_B",
+            6,
+            ("m/s",) * 3 + ("rad/s",) * 3,
+            "commanded TCP twist [v; ω] in the base frame (speedL)",
+        ),
+        Port(
+            "twist_law_B",
+            6,
+            ("m/s",) * 3 + ("rad/s",) * 3,
+            "the admittance law's twist before the fixture and the limits",
+        ),
+        Port("status", 1, "1", "Status flags of this tick (hoh_cosim.control.limits.Status)"),
+    )
+
+    def __init__(self, params: ControllerParams | None = None) -> None:
+        self.params = p = params or ControllerParams()
+        # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
+        tr, rot = p.translation, p.rotation
+        self._law6: AdmittanceGains | None = None
+        if tr.law == rot.law and tr.law != "isotropic":
+            self._law6 = _stack_gains(tr, rot)
+        self._box = (p.limits.workspace_min_B.tolist(), p.limits.workspace_max_B.tolist())
+        self.reset()
+
+    def reset(self) -> None:
+        """Clear the latched stops and the previous command."""
+        self._latched = 0
+        self._bits = 0
+        self._v_prev = np.zeros(3)
+        self._w_prev = np.zeros(3)
+
+    @property
+    def status(self) -> Status:
+        """The flags of the last step."""
+        return Status(self._bits)
+
+    # Status bits are plain ints in the hot path: IntFlag arithmetic costs a microsecond a time.
+    def _checks(self, inputs: Mapping[str, Vec]) -> int:
+        p = self.params
+        status = self._latched
+        F, tau, F_probe, p_BT = (
+            inputs["F_hand_B"],
+            inputs["tau_hand_B"],
+            inputs["F_probe_B"],
+            inputs["p_BT_B"],
+        )
+        ft_age, probe_age = float(inputs["ft_age"][0]), float(inputs["probe_age"][0])
+        ready = float(inputs["ready"][0])
+        probe_sq = float(F_probe @ F_probe)
+        # a NaN or an infinity anywhere makes this sum non-finite (so does an overflow: also a fault)
+        total = float(F @ F) + float(tau @ tau) + probe_sq + float(p_BT @ p_BT)
+        if not math.isfinite(total + ft_age + probe_age + ready):
+            return status | _NONFINITE
+        if ready < 0.5:
+            status |= _NOT_READY
+        if is_stale(ft_age, p.ft_period_s, p.limits.stale_periods):
+            status |= _STALE_FT
+        if p.use_probe:
+            if is_stale(probe_age, p.probe_period_s, p.limits.stale_periods):
+                status |= _STALE_PROBE
+            if math.sqrt(probe_sq) >= p.limits.probe_force_stop:
+                status |= _FORCE_STOP
+        return status
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
+        p = self.params
+        lim = p.limits
+        status = self._checks(inputs)
+        self._latched |= status & _LATCHED
+        if status & _STOP:
+            self._v_prev = np.zeros(3)
+            self._w_prev = np.zeros(3)
+            self._bits = status
+            return {
+                "twist_B": np.zeros(6),
+                "twist_law_B": np.zeros(6),
+                "status": np.array([float(status)]),
+            }
+
+        F_probe = inputs["F_probe_B"]
+        F = inputs["F_hand_B"]
+        if p.use_probe and p.contact_compensation:
+            F = contact_compensated(F, F_probe)
+        if self._law6 is not None:
+            twist_law = apply_law(np.concatenate([F, inputs["tau_hand_B"]]), self._law6)
+            v, w = twist_law[:3], twist_law[3:]
+        else:
+            v = apply_law(F, p.translation)
+            w = apply_law(inputs["tau_hand_B"], p.rotation)
+            twist_law = np.concatenate([v, w])
+
+        if p.use_probe and p.virtual_fixture:
+            v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, p.fixture_up_B)
+            if engaged:
+                status |= _FIXTURE
+        v, hit_v = clamp_speed(v, lim.max_linear_speed)
+        w, hit_w = clamp_speed(w, lim.max_angular_speed)
+        if hit_v or hit_w:
+            status |= _SPEED_CLAMPED
+        v, hit_v = clamp_acceleration(v, self._v_prev, dt, lim.max_linear_accel)
+        w, hit_w = clamp_acceleration(w, self._w_prev, dt, lim.max_angular_accel)
+        if hit_v or hit_w:
+            status |= _ACCEL_CLAMPED
+        if p.use_probe:
+            v, hit = probe_force_limit(v, F_probe, lim.probe_force_soft_cap)
+            if hit:
+                status |= _FORCE_SOFT_CAP
+        v, hit = workspace_limit(v, inputs["p_BT_B"], *self._box)
+        if hit:
+            status |= _WORKSPACE
+
+        self._v_prev, self._w_prev = v, w
+        self._bits = status
+        return {
+            "twist_B": np.concatenate([v, w]),
+            "twist_law_B": twist_law,
+            "status": np.array([float(status)]),
+        }
+
+
+def _stack_gains(tr: AdmittanceGains, rot: AdmittanceGains) -> AdmittanceGains:
+    """One gains object over [force; torque] for the elementwise laws."""
+    stacked = AdmittanceGains.__new__(AdmittanceGains)  # six values: skip the 3-vector checks
+    for f in dataclasses.fields(AdmittanceGains):
+        a, b = getattr(tr, f.name), getattr(rot, f.name)
+        object.__setattr__(
+            stacked, f.name, a if f.name == "law" else frozen(np.concatenate([a, b]))
+        )
+    return stacked
