@@ -1,0 +1,154 @@
+"""The `hoh-cosim` command: a thin layer over the library.
+
+    hoh-cosim SCENARIO.yaml [options]          run a scenario
+    hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
+
+Exit status: 0 done; 2 the input is wrong (one line naming the file and the place); 1 the run failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from hoh_cosim import __version__
+from hoh_cosim.errors import HohError
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+
+SUBCOMMANDS = ("identify-gravity",)
+
+
+class _ArgumentParser(argparse.ArgumentParser):
+    """argparse that reports usage mistakes as one line with exit status 2 (its own default too)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: {message} (see --help)\n")
+
+
+def _gravity(text: str) -> np.ndarray:
+    parts = text.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) != 3 or not np.all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(
+            f"expected three comma-separated numbers like 0,0,-9.81, got {text!r}"
+        )
+    return np.array(values)
+
+
+def _main_parser() -> argparse.ArgumentParser:
+    parser = _ArgumentParser(
+        prog="hoh-cosim",
+        description="Hand-over-hand control of a robot-held ultrasound probe.",
+        epilog="Run a scenario with 'hoh-cosim SCENARIO.yaml'. Commands: " + ", ".join(SUBCOMMANDS),
+    )
+    parser.add_argument("--version", action="version", version=f"hoh-cosim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_ArgumentParser)
+
+    ident = sub.add_parser(
+        "identify-gravity",
+        help="identify the tool's mass, centre of mass and sensor offsets from static poses",
+        description=(
+            "Identify mass, centre of mass, force and torque bias of the tool on the wrist F/T "
+            "sensor from static, untouched poses (header rx,ry,rz,fx,fy,fz,tx,ty,tz: rotation "
+            "vector of R_BS in rad, raw averaged reading in N and N·m)."
+        ),
+    )
+    ident.add_argument("poses", metavar="POSES.csv")
+    ident.add_argument(
+        "--out",
+        default="calibration.json",
+        metavar="FILE",
+        help="where to write the calibration (default: calibration.json)",
+    )
+    ident.add_argument(
+        "--gravity",
+        type=_gravity,
+        default=None,
+        metavar="GX,GY,GZ",
+        help="gravity in the base frame, m/s² (default: 0,0,-9.81)",
+    )
+    return parser
+
+
+def _run_scenario(argv: Sequence[str]) -> int:
+    scenario = argv[0]
+    print(
+        f"hoh-cosim: cannot run {scenario}: running scenarios is not available in hoh-cosim "
+        f"{__version__}; available commands: {', '.join(SUBCOMMANDS)}",
+        file=sys.stderr,
+    )
+    return EXIT_BAD_INPUT
+
+
+def _fmt(values: np.ndarray, digits: int = 5, signed: bool = True) -> str:
+    sign = "+" if signed else ""
+    return "[" + ", ".join(f"{v:{sign}.{digits}f}" for v in values) + "]"
+
+
+def _identify_gravity(args: argparse.Namespace) -> int:
+    from hoh_cosim.calibration import read_poses_csv, write_calibration
+    from hoh_cosim.control.gravity import identify_gravity
+    from hoh_cosim.control.vectors import GRAVITY_B
+    from hoh_cosim.errors import IdentificationError, InputFileError
+
+    g_B = GRAVITY_B if args.gravity is None else args.gravity
+    R_BS, wrench = read_poses_csv(args.poses)
+    try:
+        cal = identify_gravity(R_BS, wrench, g_B)
+    except IdentificationError as exc:
+        raise InputFileError(args.poses, "", str(exc)) from None
+    g = float(np.linalg.norm(g_B))
+    print(
+        f"identified from {cal.n_poses} poses in {args.poses} "
+        f"(gravity {_fmt(g_B, 3)} m/s², condition number {cal.condition_number:.3g})"
+    )
+    print(
+        f"  mass            {cal.mass_kg:.5f} ± {cal.mass_se_kg:.5f} kg   "
+        f"(mg = {cal.mass_kg * g:.4f} N)"
+    )
+    print(f"  centre of mass  {_fmt(cal.com_m)} ± {_fmt(cal.com_se_m, signed=False)} m")
+    print(
+        f"  force bias      {_fmt(cal.force_bias_N, 4)} ± {_fmt(cal.force_bias_se_N, 4, False)} N"
+    )
+    print(
+        f"  torque bias     {_fmt(cal.torque_bias_Nm, 5)} ± {_fmt(cal.torque_bias_se_Nm, 5, False)} N·m"
+    )
+    print("  residuals          fx       fy       fz       tx       ty       tz   (N, N·m)")
+    for label, values in (
+        ("RMS before", cal.residual_rms_before),
+        ("max before", cal.residual_max_before),
+        ("RMS after ", cal.residual_rms_after),
+        ("max after ", cal.residual_max_after),
+    ):
+        print(f"  {label}  " + " ".join(f"{v:8.4f}" for v in values))
+    print("  (before: reading minus the identified bias; after: minus the tool-weight model too)")
+    write_calibration(args.out, cal)
+    print(f"wrote {args.out}")
+    return EXIT_OK
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if argv and not argv[0].startswith("-") and argv[0] not in SUBCOMMANDS:
+            return _run_scenario(argv)
+        args = _main_parser().parse_args(argv)
+        if args.command == "identify-gravity":
+            return _identify_gravity(args)
+        _main_parser().print_help()
+        return EXIT_BAD_INPUT
+    except HohError as exc:
+        print(f"hoh-cosim: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("hoh-cosim: interrupted", file=sys.stderr)
+        return 130
