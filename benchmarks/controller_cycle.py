@@ -42,11 +42,15 @@ def make_inputs(cycles: int, packet_every: int, rng: np.random.Generator) -> lis
             wrench = weight + np.concatenate([R_BS_EQ1.T @ hand_B, rng.normal(0, 0.02, 3)])
             wrench[:3] += rng.normal(0.0, 0.3, 3)
             force_P = R_BP.T @ np.array([0.0, 0.0, 0.5]) + rng.normal(0.0, 0.05, 3)
-        inputs.append({
-            "wrench_S": wrench.copy(), "ft_counter": np.array([counter]),
-            "force_P": force_P.copy(), "probe_counter": np.array([counter]),
-            "R_BS": R_BS_EQ1.reshape(9).copy(),
-        })
+        inputs.append(
+            {
+                "wrench_S": wrench.copy(),
+                "ft_counter": np.array([counter]),
+                "force_P": force_P.copy(),
+                "probe_counter": np.array([counter]),
+                "R_BS": R_BS_EQ1.reshape(9).copy(),
+            }
+        )
     return inputs
 
 
