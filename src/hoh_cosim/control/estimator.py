@@ -220,24 +220,50 @@ def make_filter_bank(params: EstimatorParams) -> FilterBank:
     return _SeparateFilters([ZeroOrderHold() for _ in range(3)])
 
 
-class _Rebias:
-    """Running mean of the first `n` compensated packets; `bias` is set when it completes."""
+class _SensorChannel:
+    """One sensor's packets: a new one when its counter changes, non-finite ones rejected and
+    counted, the time of the last good one, and the running mean that rebiases the sensor."""
 
-    def __init__(self, n: int, given: Vec) -> None:
-        self.n = n
+    def __init__(self, counter_port: str, value_port: str, rebias_packets: int, given: Vec) -> None:
+        self.counter_port = counter_port
+        self.value_port = value_port
+        self.rebias_packets = rebias_packets
         self.given = given
-        self.restart()
+        self.reset()
 
-    def restart(self) -> None:
-        self.count = 0
-        self.total = np.zeros_like(self.given)
-        self.bias: Vec | None = self.given.copy() if self.n == 0 else None
+    def reset(self) -> None:
+        self.counter = 0.0  # counters start at 0: no packet yet
+        self.t_last: float | None = None
+        self.rejected = 0
+        self.restart_rebias()
 
-    def add(self, sample: Vec) -> None:
-        self.total += sample
-        self.count += 1
-        if self.count >= self.n:
-            self.bias = self.total / self.count
+    def restart_rebias(self) -> None:
+        self._count = 0
+        self._total = np.zeros_like(self.given)
+        self.bias: Vec | None = self.given.copy() if self.rebias_packets == 0 else None
+
+    def new_packet(self, t: float, inputs: Mapping[str, Vec]) -> Vec | None:
+        """The values of this tick's packet if it is new and finite, else None."""
+        counter = float(inputs[self.counter_port][0])
+        if counter == self.counter:
+            return None
+        self.counter = counter
+        values = inputs[self.value_port]
+        if not math.isfinite(float(values.sum())):
+            self.rejected += 1
+            return None
+        self.t_last = t
+        return values
+
+    def debiased(self, ext: Vec) -> Vec | None:
+        """`ext` minus the sensor offset; None while the packet goes into the rebias mean."""
+        if self.bias is not None:
+            return ext - self.bias
+        self._total += ext
+        self._count += 1
+        if self._count >= self.rebias_packets:
+            self.bias = self._total / self._count
+        return None
 
 
 _F = ("N", "N", "N")
@@ -274,27 +300,25 @@ class Estimator:
             GravityModel(ToolParams(p.probe_mass_kg), p.g_B) if p.probe_mass_kg > 0 else None
         )
         self._filters = make_filter_bank(p)
-        self._ft_rebias = _Rebias(p.ft_rebias_packets, p.ft_bias)
-        self._probe_rebias = _Rebias(p.probe_rebias_packets, p.probe_bias)
+        self._ft = _SensorChannel("ft_counter", "wrench_S", p.ft_rebias_packets, p.ft_bias)
+        self._probe = _SensorChannel(
+            "probe_counter", "force_P", p.probe_rebias_packets, p.probe_bias
+        )
         self._shift_torque = bool(np.any(p.p_SR_S != 0.0))
         self.reset()
 
     def reset(self) -> None:
         self._filters.reset()
-        self._ft_rebias.restart()
-        self._probe_rebias.restart()
-        self._ft_counter = 0.0
-        self._probe_counter = 0.0
-        self._t_ft: float | None = None
-        self._t_probe: float | None = None
+        self._ft.reset()
+        self._probe.reset()
+        self._t0: float | None = None
         self._F_meas_S = np.zeros(3)
-        self.rejected_packets = 0
         self._update_ready()
 
     def start_rebias(self) -> None:
         """Take the next N packets of each sensor as the new offset (nobody may touch the tool)."""
-        self._ft_rebias.restart()
-        self._probe_rebias.restart()
+        self._ft.restart_rebias()
+        self._probe.restart_rebias()
         self._filters.reset()
         self._update_ready()
 
@@ -303,20 +327,22 @@ class Estimator:
         """Both sensors rebiased (or the probe sensor not in use)."""
         return self._ready
 
+    @property
+    def rejected_packets(self) -> int:
+        """Packets refused for a NaN or an infinity, both sensors together."""
+        return self._ft.rejected + self._probe.rejected
+
     def _update_ready(self) -> None:
-        self._ready = self._ft_rebias.bias is not None and (
-            self._probe_rebias.bias is not None or not self.params.use_probe
+        self._ready = self._ft.bias is not None and (
+            self._probe.bias is not None or not self.params.use_probe
         )
 
     def _ft_packet(self, w: Wrench, R_BS: Rot3) -> Wrench | None:
         """The compensated wrench of a new FT-150 packet, or None while rebiasing."""
-        ext = w - self._weight.weight_S(R_BS)
-        rb = self._ft_rebias
-        if rb.bias is None:
-            rb.add(ext)
+        ext = self._ft.debiased(w - self._weight.weight_S(R_BS))
+        if ext is None:
             self._update_ready()
             return None
-        ext = ext - rb.bias
         if self._shift_torque:  # τ about R = τ about S - p_SR × f
             p, f = self.params.p_SR_S, ext
             ext[3:] -= (
@@ -327,46 +353,29 @@ class Estimator:
         return ext
 
     def _probe_packet(self, f: Vec3, R_BS: Rot3) -> Vec3 | None:
-        if self._probe_weight is None:
-            ext = f
-        else:
-            ext = f - self._probe_weight.weight_S(R_BS @ self.params.R_SP)[:3]
-        rb = self._probe_rebias
-        if rb.bias is None:
-            rb.add(ext)
+        """The compensated force of a new FSE103 packet, or None while rebiasing."""
+        if self._probe_weight is not None:
+            f = f - self._probe_weight.weight_S(R_BS @ self.params.R_SP)[:3]
+        ext = self._probe.debiased(f)
+        if ext is None:
             self._update_ready()
-            return None
-        return ext - rb.bias
+        return ext
 
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
-        if self._t_ft is None:
-            self._t_ft = self._t_probe = t
+        if self._t0 is None:
+            self._t0 = t
         R_BS = inputs["R_BS"].reshape(3, 3)
 
-        ft_z = None
-        counter = float(inputs["ft_counter"][0])
-        if counter != self._ft_counter:
-            self._ft_counter = counter
-            w = inputs["wrench_S"]
-            if math.isfinite(float(w.sum())):
-                self._t_ft = t
-                ft_z = self._ft_packet(w, R_BS)
-            else:
-                self.rejected_packets += 1
-
+        w = self._ft.new_packet(t, inputs)
+        ft_z = None if w is None else self._ft_packet(w, R_BS)
         probe_z = None
         if self.params.use_probe:
-            counter = float(inputs["probe_counter"][0])
-            if counter != self._probe_counter:
-                self._probe_counter = counter
-                f = inputs["force_P"]
-                if math.isfinite(float(f.sum())):
-                    self._t_probe = t
-                    probe_z = self._probe_packet(f, R_BS)
-                else:
-                    self.rejected_packets += 1
+            f = self._probe.new_packet(t, inputs)
+            probe_z = None if f is None else self._probe_packet(f, R_BS)
+            probe_age = t - (self._t0 if self._probe.t_last is None else self._probe.t_last)
         else:
-            self._t_probe = t
+            probe_age = 0.0
+        ft_age = t - (self._t0 if self._ft.t_last is None else self._ft.t_last)
 
         if self._ready:
             if ft_z is not None:
@@ -393,8 +402,8 @@ class Estimator:
             "tau_hand_B": tau_hand_B,
             "F_probe_B": F_probe_B,
             "F_hand_meas_B": F_meas_B,
-            "ft_age": np.array([t - self._t_ft]),
-            "probe_age": np.array([t - self._t_probe]),
+            "ft_age": np.array([ft_age]),
+            "probe_age": np.array([probe_age]),
             "ready": np.array([ready]),
             "rejected_packets": np.array([float(self.rejected_packets)]),
         }
