@@ -1,0 +1,186 @@
+"""The probe and its housing: geometry, mass, the wrench they put on the wrist sensor, cable drag.
+
+Frames (DESIGN.md §5): E flange, S wrist F/T sensor, P probe-contact sensor, H the handle where the
+hand pushes, C the tool's centre of mass, T the probe tip (the robot's TCP), K where the cable leaves
+the housing.
+
+Geometry (ours, with the seed's figures where it has them):
+- S sits on the flange turned half a turn about x (R_ES = Rx(π)), so that at the home pose (probe
+  pointing down) R_BS is the seed's eq. 1; the probe sensor is mounted as eq. 2 says (R_SP of
+  `hoh_cosim.control.frames`). S's z axis points from the tool towards the robot, so the tool hangs
+  along -z_S.
+- 0.48 kg below the wrist sensor (the seed's scale, 5.B); centre of mass x, y as the seed's fit
+  (-0.01250, -0.00033) m (4.B), z = -0.075 m (the seed did not identify it: about a third of the way
+  down a 0.20 m housing-and-probe).
+- The FT-150 is 37.5 mm thick (flange to S); the probe sensor 60 mm, the handle 90 mm and the tip
+  200 mm below S. The TCP frame T has the flange's orientation.
+- Inertia about C: a 0.48 kg cylinder of radius 3 cm and length 0.2 m.
+
+The wrench on the wrist sensor is Newton–Euler on the tool, everything in the base frame B:
+
+    f = F_hand + F_contact + F_cable + m (g - a_C)
+    τ_S = τ_hand + r_SH × F_hand + r_ST × F_contact + r_SK × F_cable + r_SC × m (g - a_C)
+          - (I_C α + ω × I_C ω)
+
+then turned into S. At rest and untouched it is exactly `tool_weight_wrench_S`, the estimator's model.
+
+Cable drag (seed 5.B, Fig. 17): the probe's cable leaves the housing at K along its y axis and runs
+to an anchor A fixed beside the robot. It pulls K towards A with a constant tension and hangs part of
+its weight on K. The pull depends on where K is relative to A, not only on the direction of gravity,
+so no mass and centre of mass can model it: tilting the tool 45° one way and 135° the other leaves
+different residuals after gravity compensation, as the seed saw.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hoh_cosim.control.frames import R_SP_SEED, rotvec_to_matrix, skew
+from hoh_cosim.control.vectors import (
+    Rot3,
+    Vec3,
+    as_nonnegative_vector,
+    as_rotation,
+    as_scalar,
+    as_vector,
+    cross3,
+    frozen,
+)
+
+__all__ = ["CableDrag", "ToolLoads", "ToolModel", "cable_force_B"]
+
+R_X_HALF_TURN = frozen(rotvec_to_matrix([math.pi, 0.0, 0.0]))
+
+
+@dataclass(frozen=True)
+class CableDrag:
+    """A cable from the housing (point K, in S) to an anchor A fixed in the base frame."""
+
+    enabled: bool = False
+    p_SK_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.035, -0.05]))  # [m] exit point
+    anchor_B: Vec3 = field(default_factory=lambda: frozen([0.25, -0.45, 0.05]))  # [m]
+    tension_N: float = 0.6  # [N] pull towards the anchor
+    hanging_weight_N: float = 0.3  # [N] of the cable's weight hanging on K
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "p_SK_S", as_vector(self.p_SK_S, 3, "p_SK_S"))
+        object.__setattr__(self, "anchor_B", as_vector(self.anchor_B, 3, "anchor_B"))
+        object.__setattr__(self, "tension_N", as_scalar(self.tension_N, "tension_N", low=0.0))
+        object.__setattr__(
+            self, "hanging_weight_N", as_scalar(self.hanging_weight_N, "hanging_weight_N", low=0.0)
+        )
+
+
+@dataclass(frozen=True)
+class ToolModel:
+    """Mass properties and mounting of everything below the wrist sensor."""
+
+    mass_kg: float = 0.48
+    p_SC_S: Vec3 = field(default_factory=lambda: frozen([-0.01250, -0.00033, -0.075]))  # [m]
+    inertia_C_S: Vec3 = field(default_factory=lambda: frozen([1.7e-3, 1.7e-3, 2.2e-4]))  # [kg m²]
+    p_ES_E: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 0.0375]))  # [m]
+    R_ES: Rot3 = field(default_factory=lambda: R_X_HALF_TURN.copy())
+    R_SP: Rot3 = field(default_factory=lambda: R_SP_SEED.copy())
+    p_SP_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, -0.06]))  # [m]
+    p_SH_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, -0.09]))  # [m] handle
+    p_ST_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, -0.20]))  # [m] probe tip
+    probe_mass_kg: float = 0.0  # [kg] below the probe sensor (not modelled by default)
+    cable: CableDrag = field(default_factory=CableDrag)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mass_kg", as_scalar(self.mass_kg, "mass_kg", low=0.0))
+        object.__setattr__(
+            self, "probe_mass_kg", as_scalar(self.probe_mass_kg, "probe_mass_kg", low=0.0)
+        )
+        for name in ("p_SC_S", "p_ES_E", "p_SP_S", "p_SH_S", "p_ST_S"):
+            object.__setattr__(self, name, as_vector(getattr(self, name), 3, name))
+        object.__setattr__(
+            self, "inertia_C_S", as_nonnegative_vector(self.inertia_C_S, 3, "inertia_C_S")
+        )
+        object.__setattr__(self, "R_ES", as_rotation(self.R_ES, "R_ES"))
+        object.__setattr__(self, "R_SP", as_rotation(self.R_SP, "R_SP"))
+
+    def flange_frames(self) -> dict[str, tuple[Vec3, Rot3]]:
+        """Every tool frame's (p_EX_E, R_EX): S, P, H, C, T (TCP, with the flange's orientation)."""
+
+        def at(p_SX_S: Vec3, R_SX: Rot3) -> tuple[Vec3, Rot3]:
+            return self.p_ES_E + self.R_ES @ p_SX_S, self.R_ES @ R_SX
+
+        eye = np.eye(3)
+        return {
+            "ft_sensor": (self.p_ES_E.copy(), self.R_ES.copy()),
+            "probe_sensor": at(self.p_SP_S, self.R_SP),
+            "handle": at(self.p_SH_S, eye),
+            "tool_com": at(self.p_SC_S, eye),
+            "tcp": at(self.p_ST_S, self.R_ES.T),
+        }
+
+
+def cable_force_B(cable: CableDrag, p_BK_B: Vec3, g_B: Vec3) -> Vec3:
+    """Force of the cable on the housing at K, in B: tension towards the anchor plus hanging weight."""
+    to_anchor = cable.anchor_B - p_BK_B
+    n = math.sqrt(float(to_anchor @ to_anchor))
+    pull = to_anchor * (cable.tension_N / n) if n > 0.0 else np.zeros(3)
+    g = math.sqrt(float(g_B @ g_B))
+    return pull + g_B * (cable.hanging_weight_N / g)
+
+
+class ToolLoads:
+    """What ideal sensors read, from the tool's motion and the forces on it (Newton–Euler above).
+
+    Computed in S, where the tool's geometry is constant: the three moment arms become one product
+    with a precomputed [[r_SH]× [r_ST]× [r_SC]×] and the inertia stays diagonal.
+    """
+
+    def __init__(self, tool: ToolModel, g_B: Vec3) -> None:
+        self.tool = tool
+        self.g_B = np.asarray(g_B, dtype=np.float64)
+        self._arms = np.hstack([skew(tool.p_SH_S), skew(tool.p_ST_S), skew(tool.p_SC_S)])
+        self._inertia = tool.inertia_C_S
+        self._R_PS = tool.R_SP.T.copy()
+
+    def readings(
+        self,
+        R_BS: Rot3,
+        a_C_B: Vec3,
+        omega_B: Vec3,
+        alpha_B: Vec3,
+        F_hand_B: Vec3,
+        tau_hand_B: Vec3,
+        F_contact_B: Vec3,
+        p_BK_B: Vec3 | None = None,
+        a_P_B: Vec3 | None = None,
+    ) -> tuple[np.ndarray, Vec3]:
+        """(wrench of the tool on the wrist sensor in S, force of the probe on the probe sensor in P).
+
+        The probe sensor carries the contact force and the weight and inertia of the probe part below
+        it (`probe_mass_kg`, accelerating with `a_P_B`).
+        """
+        tool = self.tool
+        body_B = tool.mass_kg * (self.g_B - a_C_B)
+        F_cable_B = None
+        if tool.cable.enabled and p_BK_B is not None:
+            F_cable_B = cable_force_B(tool.cable, p_BK_B, self.g_B)
+        # rows turned into S in one product: v_S = R_BSᵀ v_B  <=>  row_S = row_B R_BS
+        rows_S = np.array([F_hand_B, F_contact_B, body_B, tau_hand_B, omega_B, alpha_B]) @ R_BS
+        F_h, F_c, body, tau_h, omega, alpha = rows_S
+        f = F_h + F_c + body
+        tau = (
+            tau_h
+            + self._arms @ rows_S[:3].reshape(9)
+            - (self._inertia * alpha + cross3(omega, self._inertia * omega))
+        )
+        if F_cable_B is not None:
+            F_k = R_BS.T @ F_cable_B
+            f = f + F_k
+            tau = tau + cross3(tool.cable.p_SK_S, F_k)
+        wrench_S = np.concatenate([f, tau])
+
+        F_P_S = F_c  # the contact force, already in S
+        if tool.probe_mass_kg > 0.0:
+            a = np.zeros(3) if a_P_B is None else a_P_B
+            F_P_S = F_P_S + R_BS.T @ (tool.probe_mass_kg * (self.g_B - a))
+        return wrench_S, self._R_PS @ F_P_S
