@@ -1,0 +1,230 @@
+"""The sonographer's hand: a delayed impedance that pushes the handle through a task.
+
+The hand wants the probe tip at a reference that the task moves (a circle, a line scan, a point to
+hold). It pushes with
+
+    F_hand = sat( K (p_ref(t) - p(t - τ)) + D (v_ref(t) - v(t - τ)) )
+
+where p and v are the tip's position and velocity as the operator perceives them, a reaction delay τ
+late, K and D the stiffness and damping of a relaxed arm, and sat a limit on the force a hand gives.
+A transparent robot follows a light push, so the hand needs little force and small errors; a sluggish
+or jittery one needs more force for the same path. The pressing tasks add a force loop along the
+probe axis: the hand pushes (proportional and integral on the delayed contact force error) until the
+phantom pushes back with the target force, then relaxes.
+
+Figures (ours, from the literature's ranges):
+- reaction delay τ = 150 ms: voluntary corrections to what a person sees or feels take roughly
+  100–200 ms (long-latency reflexes are faster, visual reaction times slower);
+- K = 300 N/m, D = 20 N·s/m: hand stiffness measured in relaxed, maintained postures is of the order
+  of a few hundred N/m and hand damping of ten to a few tens of N·s/m (Mussa-Ivaldi, Hogan and Bizzi
+  1985; Tsuji et al. 1995);
+- at most 25 N: above the forces of a scan (the seed's limit on contact force is 20–25 N).
+
+Tasks: `off` (no hand on the handle), `hold` (keep the tip where it was), `circle`, `line` (a line
+scan, back and forth), `press` (press to a target contact force and hold), `scan` (press and line scan
+together), `push_release` (push with a constant force, then let go). Every task starts at `start_s`;
+before that the hand is off (so the estimator can rebias), and the tip position then is the task's
+origin.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from hoh_cosim.control.block import Port
+from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_vector, frozen
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["PLANES", "TASKS", "Operator", "OperatorParams"]
+
+TASKS = ("off", "hold", "circle", "line", "press", "scan", "push_release")
+PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+
+
+def _unit(v: Vec3, name: str) -> Vec3:
+    v = as_vector(v, 3, name)
+    n = math.sqrt(float(v @ v))
+    if n == 0.0:
+        raise ConfigError(f"{name}: expected a non-zero vector, got {v.tolist()}")
+    return frozen(v / n)
+
+
+@dataclass(frozen=True)
+class OperatorParams:
+    task: Literal["off", "hold", "circle", "line", "press", "scan", "push_release"] = "circle"
+    start_s: float = 0.0  # [s] the hand takes the handle
+    # circle: radius and period, in a plane of the base frame; the speed ramps up over ramp_s
+    radius_m: float = 0.04
+    period_s: float = 4.0  # also the back-and-forth period of a line scan
+    plane: Literal["xy", "xz", "yz"] = "xy"
+    ramp_s: float = 1.0
+    # line scan: direction and length
+    direction_B: Vec3 = field(default_factory=lambda: frozen([1.0, 0.0, 0.0]))
+    length_m: float = 0.10
+    # press and scan: contact force along the probe's pressing direction
+    target_force_N: float = 8.0
+    press_direction_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, -1.0]))
+    force_kp: float = 0.2  # [N/N]
+    force_ki: float = 0.2  # [1/s]
+    approach_force_N: float = 1.0  # [N] pushed until contact is felt
+    contact_threshold_N: float = 0.5  # [N] contact force that counts as touching
+    # push then release
+    push_force_B: Vec3 = field(default_factory=lambda: frozen([5.0, 0.0, 0.0]))  # [N]
+    release_s: float = 3.0  # [s]
+    # the human
+    stiffness: float = 300.0  # K [N/m]
+    damping: float = 20.0  # D [N·s/m]
+    reaction_delay_s: float = 0.15  # τ [s]
+    max_force_N: float = 25.0
+
+    def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {self.task!r}")
+        if self.plane not in PLANES:
+            raise ConfigError(f"plane: expected one of {', '.join(PLANES)}, got {self.plane!r}")
+        for name in (
+            "start_s",
+            "ramp_s",
+            "reaction_delay_s",
+            "force_kp",
+            "force_ki",
+            "damping",
+            "target_force_N",
+            "approach_force_N",
+            "contact_threshold_N",
+        ):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
+        for name in ("radius_m", "period_s", "length_m", "stiffness", "max_force_N"):
+            object.__setattr__(
+                self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
+            )
+        object.__setattr__(self, "release_s", as_scalar(self.release_s, "release_s"))
+        object.__setattr__(self, "direction_B", _unit(self.direction_B, "direction_B"))
+        object.__setattr__(
+            self, "press_direction_B", _unit(self.press_direction_B, "press_direction_B")
+        )
+        object.__setattr__(self, "push_force_B", as_vector(self.push_force_B, 3, "push_force_B"))
+
+
+class Operator:
+    """The hand on the handle under the block contract."""
+
+    inputs: ClassVar[tuple[Port, ...]] = (
+        Port("p_BT_B", 3, "m", "probe tip position in the base frame"),
+        Port("twist_B", 6, ("m/s",) * 3 + ("rad/s",) * 3, "probe tip twist in the base frame"),
+        Port("F_contact_B", 3, "N", "force of the phantom on the probe tip, in B"),
+    )
+    outputs: ClassVar[tuple[Port, ...]] = (
+        Port("F_hand_B", 3, "N", "force of the hand on the handle, in B"),
+        Port("tau_hand_B", 3, "N.m", "torque of the hand on the handle, in B"),
+        Port("p_ref_B", 3, "m", "where the hand wants the probe tip"),
+        Port("hand_on", 1, "1", "1 while the hand pushes the handle, else 0"),
+    )
+
+    def __init__(self, params: OperatorParams | None = None) -> None:
+        self.params = params or OperatorParams()
+        self.reset()
+
+    def reset(self) -> None:
+        self._history: deque[tuple[Vec, Vec, Vec]] = deque()
+        self._delay_ticks: int | None = None
+        self._origin: Vec | None = None
+        self._integral = 0.0
+        self._touched = False
+
+    def _perceived(self, dt: float, now: tuple[Vec, Vec, Vec]) -> tuple[Vec, Vec, Vec]:
+        """The tip position, velocity and contact force as they were a reaction delay ago."""
+        if self._delay_ticks is None:
+            self._delay_ticks = round(self.params.reaction_delay_s / dt)
+        self._history.append(now)
+        if len(self._history) > self._delay_ticks + 1:
+            self._history.popleft()
+        return self._history[0]
+
+    def reference(self, tau: float) -> tuple[Vec, Vec]:
+        """(p_ref, v_ref) `tau` seconds after the task started, relative to its origin."""
+        p = self.params
+        if p.task == "circle":
+            u1, u2 = np.zeros(3), np.zeros(3)
+            i, j = PLANES[p.plane]
+            u1[i], u2[j] = 1.0, 1.0
+            omega = 2.0 * math.pi / p.period_s
+            if tau < p.ramp_s:  # angular speed ramps up linearly: no jerk at the start
+                phi, phi_dot = 0.5 * omega * tau * tau / p.ramp_s, omega * tau / p.ramp_s
+            else:
+                phi, phi_dot = omega * (tau - 0.5 * p.ramp_s), omega
+            c, s = math.cos(phi), math.sin(phi)
+            return (
+                p.radius_m * ((c - 1.0) * u1 + s * u2),
+                p.radius_m * phi_dot * (-s * u1 + c * u2),
+            )
+        if p.task in ("line", "scan"):  # back and forth, starting and turning at rest
+            omega = 2.0 * math.pi / p.period_s
+            s = 0.5 * p.length_m * (1.0 - math.cos(omega * tau))
+            s_dot = 0.5 * p.length_m * omega * math.sin(omega * tau)
+            return s * p.direction_B, s_dot * p.direction_B
+        return np.zeros(3), np.zeros(3)
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
+        p = self.params
+        p_now = inputs["p_BT_B"]
+        p_seen, v_seen, F_contact_seen = self._perceived(
+            dt, (p_now.copy(), inputs["twist_B"][:3].copy(), inputs["F_contact_B"].copy())
+        )
+        t_end = t + dt
+        if p.task == "off" or t_end < p.start_s:
+            return self._out(np.zeros(3), p_now, on=False)
+        if self._origin is None:
+            self._origin = p_now.copy()
+        tau = t_end - p.start_s
+
+        if p.task == "push_release":
+            if t_end < p.release_s:
+                return self._out(self._saturate(p.push_force_B.copy()), self._origin, on=True)
+            return self._out(np.zeros(3), self._origin, on=False)
+
+        offset, v_ref = self.reference(tau)
+        p_ref = self._origin + offset
+        F = p.stiffness * (p_ref - p_seen) + p.damping * (v_ref - v_seen)
+        if p.task in ("press", "scan"):
+            d = p.press_direction_B
+            F = F - float(F @ d) * d  # the impedance acts across the pressing direction only
+            F = F + self._press(float(-F_contact_seen @ d), dt) * d
+        return self._out(self._saturate(F), p_ref, on=True)
+
+    def _press(self, contact_N: float, dt: float) -> float:
+        """Force along the pressing direction: a gentle approach until contact is felt, then a PI
+        loop on the (delayed) contact force; negative means lifting the probe."""
+        p = self.params
+        if not self._touched:
+            if contact_N < p.contact_threshold_N:
+                return p.approach_force_N
+            self._touched = True
+            self._integral = 0.0
+        error = p.target_force_N - contact_N
+        push = p.force_kp * error + self._integral
+        # integrate unless the push is at a limit and the error drives it further
+        limit = p.max_force_N
+        if not ((push >= limit and error > 0.0) or (push <= -limit and error < 0.0)):
+            self._integral += p.force_ki * error * dt
+        return min(max(push, -limit), limit)
+
+    def _saturate(self, F: Vec3) -> Vec3:
+        n = math.sqrt(float(F @ F))
+        limit = self.params.max_force_N
+        return F * (limit / n) if n > limit else F
+
+    @staticmethod
+    def _out(F: Vec3, p_ref: Vec3, on: bool) -> dict[str, Vec]:
+        return {
+            "F_hand_B": F,
+            "tau_hand_B": np.zeros(3),
+            "p_ref_B": np.array(p_ref, dtype=float),
+            "hand_on": np.array([1.0 if on else 0.0]),
+        }
