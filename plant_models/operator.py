@@ -38,21 +38,13 @@ from typing import ClassVar, Literal
 import numpy as np
 
 from hoh_cosim.control.block import Port
-from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_vector, frozen
+from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, as_vector, frozen
 from hoh_cosim.errors import ConfigError
 
 __all__ = ["PLANES", "TASKS", "Operator", "OperatorParams"]
 
 TASKS = ("off", "hold", "circle", "line", "press", "scan", "push_release")
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
-
-
-def _unit(v: Vec3, name: str) -> Vec3:
-    v = as_vector(v, 3, name)
-    n = math.sqrt(float(v @ v))
-    if n == 0.0:
-        raise ConfigError(f"{name}: expected a non-zero vector, got {v.tolist()}")
-    return frozen(v / n)
 
 
 @dataclass(frozen=True)
@@ -105,9 +97,9 @@ class OperatorParams:
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
         object.__setattr__(self, "release_s", as_scalar(self.release_s, "release_s"))
-        object.__setattr__(self, "direction_B", _unit(self.direction_B, "direction_B"))
+        object.__setattr__(self, "direction_B", as_unit_vector(self.direction_B, "direction_B"))
         object.__setattr__(
-            self, "press_direction_B", _unit(self.press_direction_B, "press_direction_B")
+            self, "press_direction_B", as_unit_vector(self.press_direction_B, "press_direction_B")
         )
         object.__setattr__(self, "push_force_B", as_vector(self.push_force_B, 3, "push_force_B"))
 

@@ -95,6 +95,28 @@ def _rate_and_latency(params: object) -> None:
     object.__setattr__(params, "latency_s", as_scalar(params.latency_s, "latency_s", low=0.0))
 
 
+class _PacketSensor:
+    """What both sensors share: a packet clock sampling `_measure(true)` per packet, and the last
+    delivered packet held with its counter."""
+
+    true_port: ClassVar[str]
+    value_port: ClassVar[str]
+    size: ClassVar[int]
+    clock: PacketClock
+
+    def _measure(self, true: Vec) -> Vec:
+        raise NotImplementedError
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
+        true = inputs[self.true_port]
+        self.clock.advance(t + dt, lambda: self._measure(true))
+        latest = self.clock.latest
+        return {
+            self.value_port: np.zeros(self.size) if latest is None else latest.copy(),
+            "counter": np.array([float(self.clock.delivered)]),
+        }
+
+
 def _quantise(x: Vec, step: Vec) -> Vec:
     return np.where(step > 0.0, np.round(x / np.where(step > 0.0, step, 1.0)) * step, x)
 
@@ -120,8 +142,10 @@ class FT150Params:
             object.__setattr__(self, name, as_nonnegative_vector(getattr(self, name), 6, name))
 
 
-class FT150Sensor:
+class FT150Sensor(_PacketSensor):
     """The Robotiq FT-150 wrist sensor under the block contract; noise from the injected generator."""
+
+    true_port, value_port, size = "wrench_S_true", "wrench_S", 6
 
     inputs: ClassVar[tuple[Port, ...]] = (
         Port("wrench_S_true", 6, WRENCH_UNITS, "true wrench of the tool on the sensor, in S"),
@@ -157,15 +181,6 @@ class FT150Sensor:
         self._last_sample_time = t_sample
         noise = self.rng.normal(0.0, 1.0, 6) * p.noise_sigma
         return _quantise(true + p.offset + self.drift + noise, p.quantisation)
-
-    def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
-        true = inputs["wrench_S_true"]
-        self.clock.advance(t + dt, lambda: self._measure(true))
-        latest = self.clock.latest
-        return {
-            "wrench_S": np.zeros(6) if latest is None else latest.copy(),
-            "counter": np.array([float(self.clock.delivered)]),
-        }
 
 
 # --- FSE103 --------------------------------------------------------------------------------
@@ -230,8 +245,10 @@ class FSE103Params:
         )
 
 
-class FSE103Sensor:
+class FSE103Sensor(_PacketSensor):
     """The Variense FSE103 in its housing under the block contract."""
+
+    true_port, value_port, size = "force_P_true", "force_P", 3
 
     inputs: ClassVar[tuple[Port, ...]] = (
         Port("force_P_true", 3, "N", "true force of the probe on the sensor, in P"),
@@ -270,12 +287,3 @@ class FSE103Sensor:
         if p.ideal:
             return true.copy()
         return self.housing_output(true) + p.offset + self.rng.normal(0.0, 1.0, 3) * p.noise_sigma
-
-    def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
-        true = inputs["force_P_true"]
-        self.clock.advance(t + dt, lambda: self._measure(true))
-        latest = self.clock.latest
-        return {
-            "force_P": np.zeros(3) if latest is None else latest.copy(),
-            "counter": np.array([float(self.clock.delivered)]),
-        }

@@ -27,7 +27,14 @@ from typing import Literal
 
 import numpy as np
 
-from hoh_cosim.control.vectors import Vec3, as_positive_vector, as_scalar, as_vector, frozen
+from hoh_cosim.control.vectors import (
+    Vec3,
+    as_positive_vector,
+    as_scalar,
+    as_unit_vector,
+    as_vector,
+    frozen,
+)
 from hoh_cosim.errors import ConfigError
 
 __all__ = ["SHAPES", "Contact", "PhantomParams", "contact_force", "surface_depth"]
@@ -53,11 +60,9 @@ class PhantomParams:
         if self.shape not in SHAPES:
             raise ConfigError(f"shape: expected one of {', '.join(SHAPES)}, got {self.shape!r}")
         object.__setattr__(self, "plane_point_B", as_vector(self.plane_point_B, 3, "plane_point_B"))
-        normal = as_vector(self.plane_normal_B, 3, "plane_normal_B")
-        n = math.sqrt(float(normal @ normal))
-        if n == 0.0:
-            raise ConfigError("plane_normal_B: expected a non-zero vector, got [0.0, 0.0, 0.0]")
-        object.__setattr__(self, "plane_normal_B", frozen(normal / n))
+        object.__setattr__(
+            self, "plane_normal_B", as_unit_vector(self.plane_normal_B, "plane_normal_B")
+        )
         object.__setattr__(
             self, "ellipsoid_center_B", as_vector(self.ellipsoid_center_B, 3, "ellipsoid_center_B")
         )

@@ -43,8 +43,7 @@ from hoh_cosim.control.limits import (
     probe_force_limit,
     workspace_limit,
 )
-from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_vector, frozen
-from hoh_cosim.errors import ConfigError
+from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, frozen
 
 __all__ = ["ControllerParams", "HandGuidingController"]
 
@@ -76,11 +75,7 @@ class ControllerParams:
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
 
     def __post_init__(self) -> None:
-        up = as_vector(self.fixture_up_B, 3, "fixture_up_B")
-        n = math.sqrt(float(up @ up))
-        if n == 0.0:
-            raise ConfigError("fixture_up_B: expected a non-zero vector, got [0.0, 0.0, 0.0]")
-        object.__setattr__(self, "fixture_up_B", frozen(up / n))
+        object.__setattr__(self, "fixture_up_B", as_unit_vector(self.fixture_up_B, "fixture_up_B"))
         object.__setattr__(
             self,
             "fixture_threshold_N",

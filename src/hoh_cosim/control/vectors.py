@@ -79,6 +79,15 @@ def as_positive_vector(value: object, size: int, name: str) -> Vec:
     return v
 
 
+def as_unit_vector(value: object, name: str) -> Vec3:
+    """`value` as a direction: 3 finite numbers, not all zero, scaled to unit length."""
+    v = as_vector(value, 3, name)
+    n = float(np.sqrt(v @ v))
+    if n == 0.0:
+        raise ConfigError(f"{name}: expected a non-zero vector, got {v.tolist()}")
+    return frozen(v / n)
+
+
 def as_rotation(value: object, name: str, tol: float = 1e-6) -> Rot3:
     """`value` (3x3, or 9 numbers row by row) as a proper rotation matrix, checked to `tol`."""
     try:
