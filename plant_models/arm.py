@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -43,6 +44,18 @@ the default tool. Smallest singular value of the TCP Jacobian 0.21: far from sin
 
 @dataclass(frozen=True)
 class ArmParams:
+    UNITS: ClassVar[dict[str, Any]] = {
+        "rate_hz": "Hz",
+        "latency_cycles": "1",
+        "acceleration": "m/s2",
+        "angular_acceleration": "rad/s2",
+        "q0": "rad",
+        "dls_threshold": "1",
+        "dls_max_damping": "1",
+        "joint_speed_limit": "rad/s",
+        "joint_position_limit": "rad",
+    }
+
     rate_hz: float = 125.0  # the seed's UR5 is a CB3; 500 for an e-series
     latency_cycles: int = 1
     acceleration: float = 1.5  # [m/s²] speedL `a`: above the controller's own 1 m/s² clamp
@@ -81,8 +94,11 @@ class ArmParams:
 
 
 def damped_least_squares(J: Vec, twist: Vec, threshold: float, max_damping: float) -> Vec:
-    """q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ ξ with λ² = (1 - (σ_min/ε)²) λ_max² below σ_min = ε, else 0."""
+    """q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ ξ with λ² = (1 - (σ_min/ε)²) λ_max² below σ_min = ε, else 0
+    (then it is the plain solution J⁻¹ξ of a square J)."""
     sigma_min = float(np.linalg.svd(J, compute_uv=False)[-1])
+    if sigma_min >= threshold and J.shape[0] == J.shape[1]:
+        return np.linalg.solve(J, twist)
     lam2 = 0.0
     if sigma_min < threshold:
         lam2 = (1.0 - (sigma_min / threshold) ** 2) * max_damping**2

@@ -33,7 +33,7 @@ import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -74,6 +74,39 @@ class OperatorParams:
     damping: float = 20.0  # D [N·s/m]
     reaction_delay_s: float = 0.15  # τ [s]
     max_force_N: float = 25.0
+    released: bool = False  # True: the hand has let go of the handle (a scheduled release)
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "start_s": "s",
+        "radius_m": "m",
+        "period_s": "s",
+        "ramp_s": "s",
+        "direction_B": "1",
+        "length_m": "m",
+        "target_force_N": "N",
+        "press_direction_B": "1",
+        "force_kp": "1",
+        "force_ki": "1/s",
+        "approach_force_N": "N",
+        "contact_threshold_N": "N",
+        "push_force_B": "N",
+        "release_s": "s",
+        "stiffness": "N/m",
+        "damping": "N.s/m",
+        "reaction_delay_s": "s",
+        "max_force_N": "N",
+    }
+    TUNABLE: ClassVar[frozenset[str]] = frozenset(
+        {
+            "released",
+            "target_force_N",
+            "push_force_B",
+            "release_s",
+            "stiffness",
+            "damping",
+            "max_force_N",
+        }
+    )
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -123,6 +156,10 @@ class Operator:
         self.params = params or OperatorParams()
         self.reset()
 
+    def retune(self, params: OperatorParams) -> None:
+        """New parameters while running (a release, a new target force): the task goes on."""
+        self.params = params
+
     def reset(self) -> None:
         self._history: deque[tuple[Vec, Vec, Vec]] = deque()
         self._delay_ticks: int | None = None
@@ -170,7 +207,7 @@ class Operator:
             dt, (p_now.copy(), inputs["twist_B"][:3].copy(), inputs["F_contact_B"].copy())
         )
         t_end = t + dt
-        if p.task == "off" or t_end < p.start_s:
+        if p.task == "off" or p.released or t_end < p.start_s:
             return self._out(np.zeros(3), p_now, on=False)
         if self._origin is None:
             self._origin = p_now.copy()

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -31,6 +31,9 @@ _TWIST_UNITS = ("m/s",) * 3 + ("rad/s",) * 3
 
 @dataclass(frozen=True)
 class PlantParams:
+    UNITS: ClassVar[dict[str, Any]] = {"g_B": "m/s2"}
+    TUNABLE: ClassVar[frozenset[str]] = frozenset({"phantom"})  # e.g. move the phantom
+
     arm: ArmParams = field(default_factory=ArmParams)
     tool: ToolModel = field(default_factory=ToolModel)
     phantom: PhantomParams = field(default_factory=PhantomParams)
@@ -78,6 +81,14 @@ class Plant:
         self._cycle = -1
         self._outputs = self._evaluate(np.zeros(3), np.zeros(3))
 
+    def retune(self, params: PlantParams) -> None:
+        """New parameters while running (only the phantom may change)."""
+        self.params = params
+
+    def initial_outputs(self) -> dict[str, Vec]:
+        """The outputs at t = 0, before any step: the arm at rest at q0."""
+        return self._outputs
+
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         cycle = math.floor(t / self.arm.period + 1e-9)
         if cycle != self._cycle:
@@ -112,8 +123,8 @@ class Plant:
             "p_BT_B": p_BT,
             "R_BT": R_BT.reshape(9),
             "twist_B": twist,
-            "q": arm.q.copy(),
-            "qd": arm.qd.copy(),
+            "q": arm.q,
+            "qd": arm.qd,
             "p_BS_B": p_BS,
             "R_BS": R_BS.reshape(9),
             "wrench_S": wrench_S,

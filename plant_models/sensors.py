@@ -9,8 +9,9 @@ Every imperfection has a size, and a size of zero switches it off; `ideal=True` 
 at once (the packet rate and latency stay: they are the interface, not an error).
 
 FT-150 (seed 4.C and notes/hardware.md):
-- white noise per axis, σ = the seed's static max |noise| (1.15, 1.06, 0.31 N) / 3.5, the max of
-  ~2000 Gaussian samples; torques on a 5 cm lever (the seed gives no torque figure);
+- white noise per axis, σ = the seed's static max |noise| / 3.5 (the max of ~2000 Gaussian samples);
+  the seed measured 1.15, 1.06, 0.31 N on base x, y, z at home, which are the sensor's y, x, z
+  (eq. 1); torques on a 5 cm lever (the seed gives no torque figure);
 - an offset (the unzeroed sensor) and a slow random-walk drift of it (0.005 N/√s: ~0.1 N in 10 min);
 - quantisation of the stream's printed values, assumed 0.01 N and 0.0005 N·m;
 - 200 Hz (the seed saw a packet every 5 ms; 100 and 62.5 Hz are also seen), 2 ms latency (assumed:
@@ -31,12 +32,16 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from hoh_cosim.control.block import WRENCH_UNITS, Port
-from hoh_cosim.control.estimator import FSE103_NOISE_MAX, FT150_NOISE_MAX, FT150_TORQUE_NOISE_MAX
+from hoh_cosim.control.estimator import (
+    FSE103_NOISE_MAX,
+    FT150_NOISE_MAX_S,
+    FT150_TORQUE_NOISE_MAX_S,
+)
 from hoh_cosim.control.vectors import (
     Vec,
     as_nonnegative_vector,
@@ -76,12 +81,14 @@ class PacketClock:
     def sample_time(self, k: int) -> float:
         return self.phase_s + (k + 1) / self.rate_hz
 
-    def advance(self, t_end: float, measure: Callable[[], Vec]) -> None:
-        """Sample every packet due by `t_end` with `measure()`, deliver every packet due by then."""
+    def advance(self, t_end: float, measure: Callable[[], Vec], lost: bool = False) -> None:
+        """Sample every packet due by `t_end` with `measure()` (or lose it: a dropout), deliver
+        every packet due by then."""
         eps = 1e-9 / self.rate_hz
         while self.sample_time(self.sampled) <= t_end + eps:
-            deliver_at = self.sample_time(self.sampled) + self.latency_s
-            self._in_flight.append((deliver_at, measure()))
+            if not lost:
+                deliver_at = self.sample_time(self.sampled) + self.latency_s
+                self._in_flight.append((deliver_at, measure()))
             self.sampled += 1
         while self._in_flight and self._in_flight[0][0] <= t_end + eps:
             self.latest = self._in_flight.popleft()[1]
@@ -103,18 +110,28 @@ class _PacketSensor:
     value_port: ClassVar[str]
     size: ClassVar[int]
     clock: PacketClock
+    params: Any
+
+    def retune(self, params: Any) -> None:
+        """New parameters while running: a dropout (`connected`), an offset jump, other noise."""
+        self.params = params
 
     def _measure(self, true: Vec) -> Vec:
         raise NotImplementedError
 
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         true = inputs[self.true_port]
-        self.clock.advance(t + dt, lambda: self._measure(true))
-        latest = self.clock.latest
-        return {
-            self.value_port: np.zeros(self.size) if latest is None else latest.copy(),
-            "counter": np.array([float(self.clock.delivered)]),
-        }
+        clock = self.clock
+        delivered = clock.delivered
+        clock.advance(t + dt, lambda: self._measure(true), lost=not self.params.connected)
+        if delivered != clock.delivered or not hasattr(self, "_held"):
+            latest = clock.latest
+            # new arrays only when a packet arrives: between packets the held ones are returned
+            self._held = {
+                self.value_port: np.zeros(self.size) if latest is None else latest.copy(),
+                "counter": np.array([float(clock.delivered)]),
+            }
+        return self._held
 
 
 def _quantise(x: Vec, step: Vec) -> Vec:
@@ -127,13 +144,26 @@ class FT150Params:
     latency_s: float = 0.002
     noise_sigma: Vec = field(
         default_factory=lambda: frozen(
-            np.concatenate([FT150_NOISE_MAX, FT150_TORQUE_NOISE_MAX]) / 3.5
+            np.concatenate([FT150_NOISE_MAX_S, FT150_TORQUE_NOISE_MAX_S]) / 3.5
         )
     )  # [N, N·m]
     offset: Vec = field(default_factory=lambda: frozen([1.8, -2.4, 3.1, 0.041, -0.027, 0.013]))
     drift_per_sqrt_s: Vec = field(default_factory=lambda: frozen([0.005] * 3 + [2.5e-4] * 3))
     quantisation: Vec = field(default_factory=lambda: frozen([0.01] * 3 + [5e-4] * 3))
     ideal: bool = False
+    connected: bool = True  # False: every packet is lost (a dropout)
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "rate_hz": "Hz",
+        "latency_s": "s",
+        "noise_sigma": ("N", "N", "N", "N.m", "N.m", "N.m"),
+        "offset": ("N", "N", "N", "N.m", "N.m", "N.m"),
+        "drift_per_sqrt_s": ("N/s0.5",) * 3 + ("N.m/s0.5",) * 3,
+        "quantisation": ("N", "N", "N", "N.m", "N.m", "N.m"),
+    }
+    TUNABLE: ClassVar[frozenset[str]] = frozenset(
+        {"connected", "offset", "noise_sigma", "drift_per_sqrt_s"}
+    )
 
     def __post_init__(self) -> None:
         _rate_and_latency(self)
@@ -158,29 +188,37 @@ class FT150Sensor(_PacketSensor):
     def __init__(
         self, params: FT150Params | None = None, rng: np.random.Generator | None = None
     ) -> None:
-        self.params = params or FT150Params()
+        self.retune(params or FT150Params())
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.clock = PacketClock(self.params.rate_hz, self.params.latency_s)
         self.reset()
 
     def reset(self) -> None:
         self.clock.reset()
+        self.__dict__.pop("_held", None)
         self.drift = np.zeros(6)
         self._last_sample_time = 0.0
+
+    def retune(self, params: Any) -> None:
+        self.params = params
+        self._drifts = bool(np.any(params.drift_per_sqrt_s > 0.0))
+        self._quantum = params.quantisation if np.all(params.quantisation > 0.0) else None
 
     def _measure(self, true: Vec) -> Vec:
         p = self.params
         if p.ideal:
             return true.copy()
         t_sample = self.clock.sample_time(self.clock.sampled)
-        if np.any(p.drift_per_sqrt_s > 0.0):
+        if self._drifts:
             elapsed = t_sample - self._last_sample_time
             self.drift = self.drift + self.rng.normal(0.0, 1.0, 6) * p.drift_per_sqrt_s * np.sqrt(
                 elapsed
             )
         self._last_sample_time = t_sample
-        noise = self.rng.normal(0.0, 1.0, 6) * p.noise_sigma
-        return _quantise(true + p.offset + self.drift + noise, p.quantisation)
+        value = true + p.offset + self.drift + self.rng.normal(0.0, 1.0, 6) * p.noise_sigma
+        if self._quantum is not None:  # every axis quantised: the common case, two operations
+            return np.round(value / self._quantum) * self._quantum
+        return _quantise(value, p.quantisation)
 
 
 # --- FSE103 --------------------------------------------------------------------------------
@@ -196,6 +234,15 @@ class HousingParams:
     play_N: tuple[float, float] = (0.2, 0.8)  # w drawn uniformly in this range per axis [N]
     characterisation_seed: int = 103
     session: int = 1
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "redirection": "1",
+        "gain_error": "1",
+        "stiffening": "1/N",
+        "play_N": "N",
+        "characterisation_seed": "1",
+        "session": "1",
+    }
 
     def __post_init__(self) -> None:
         for name in ("redirection", "gain_error", "stiffening"):
@@ -236,6 +283,15 @@ class FSE103Params:
     redirection: bool = True  # C and κ
     hysteresis: bool = True  # the play
     ideal: bool = False
+    connected: bool = True  # False: every packet is lost (a dropout)
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "rate_hz": "Hz",
+        "latency_s": "s",
+        "noise_sigma": "N",
+        "offset": "N",
+    }
+    TUNABLE: ClassVar[frozenset[str]] = frozenset({"connected", "offset", "noise_sigma"})
 
     def __post_init__(self) -> None:
         _rate_and_latency(self)
@@ -269,6 +325,7 @@ class FSE103Sensor(_PacketSensor):
 
     def reset(self) -> None:
         self.clock.reset()
+        self.__dict__.pop("_held", None)
         self.play_state = np.zeros(3)
 
     def housing_output(self, f: Vec) -> Vec:

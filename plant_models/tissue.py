@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, ClassVar, Literal, NamedTuple
 
 import numpy as np
 
@@ -39,11 +39,26 @@ from hoh_cosim.errors import ConfigError
 
 __all__ = ["SHAPES", "Contact", "PhantomParams", "contact_force", "surface_depth"]
 
+_NO_FORCE = frozen([0.0, 0.0, 0.0])
+
 SHAPES = ("plane", "ellipsoid", "none")
 
 
 @dataclass(frozen=True)
 class PhantomParams:
+    UNITS: ClassVar[dict[str, Any]] = {
+        "plane_point_B": "m",
+        "plane_normal_B": "1",
+        "ellipsoid_center_B": "m",
+        "ellipsoid_axes": "m",
+        "stiffness": "N/m1.5",
+        "exponent": "1",
+        "damping": "s/m",
+        "friction": "1",
+        "viscous_friction": "N.s/m",
+        "stiction_velocity": "m/s",
+    }
+
     shape: Literal["plane", "ellipsoid", "none"] = "plane"
     plane_point_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 0.0]))  # [m]
     plane_normal_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 1.0]))  # outward
@@ -77,8 +92,7 @@ class PhantomParams:
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
 
 
-@dataclass(frozen=True)
-class Contact:
+class Contact(NamedTuple):
     force_B: Vec3  # force of the phantom on the probe tip
     depth: float  # [m] penetration, > 0 in contact
     normal_B: Vec3  # outward surface normal at the contact
@@ -105,7 +119,7 @@ def contact_force(params: PhantomParams, p_B: Vec3, v_B: Vec3) -> Contact:
     """Force of the phantom on a probe tip at p moving with velocity v."""
     depth, n = surface_depth(params, p_B)
     if depth <= 0.0:
-        return Contact(np.zeros(3), depth, n)
+        return Contact(_NO_FORCE, depth, n)
     depth_rate = -float(v_B @ n)
     spring = params.stiffness * depth**params.exponent
     F_n = max(0.0, spring * (1.0 + 1.5 * params.damping * depth_rate))

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -59,6 +60,13 @@ R_X_HALF_TURN = frozen(rotvec_to_matrix([math.pi, 0.0, 0.0]))
 class CableDrag:
     """A cable from the housing (point K, in S) to an anchor A fixed in the base frame."""
 
+    UNITS: ClassVar[dict[str, Any]] = {
+        "p_SK_S": "m",
+        "anchor_B": "m",
+        "tension_N": "N",
+        "hanging_weight_N": "N",
+    }
+
     enabled: bool = False
     p_SK_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.035, -0.05]))  # [m] exit point
     anchor_B: Vec3 = field(default_factory=lambda: frozen([0.25, -0.45, 0.05]))  # [m]
@@ -77,6 +85,19 @@ class CableDrag:
 @dataclass(frozen=True)
 class ToolModel:
     """Mass properties and mounting of everything below the wrist sensor."""
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "mass_kg": "kg",
+        "p_SC_S": "m",
+        "inertia_C_S": "kg.m2",
+        "p_ES_E": "m",
+        "R_ES": "1",
+        "R_SP": "1",
+        "p_SP_S": "m",
+        "p_SH_S": "m",
+        "p_ST_S": "m",
+        "probe_mass_kg": "kg",
+    }
 
     mass_kg: float = 0.48
     p_SC_S: Vec3 = field(default_factory=lambda: frozen([-0.01250, -0.00033, -0.075]))  # [m]
@@ -139,7 +160,7 @@ class ToolLoads:
         self.tool = tool
         self.g_B = np.asarray(g_B, dtype=np.float64)
         self._arms = np.hstack([skew(tool.p_SH_S), skew(tool.p_ST_S), skew(tool.p_SC_S)])
-        self._inertia = tool.inertia_C_S
+        self._inertia_floats = tuple(tool.inertia_C_S.tolist())
         self._R_PS = tool.R_SP.T.copy()
 
     def readings(
@@ -166,13 +187,18 @@ class ToolLoads:
             F_cable_B = cable_force_B(tool.cable, p_BK_B, self.g_B)
         # rows turned into S in one product: v_S = R_BSᵀ v_B  <=>  row_S = row_B R_BS
         rows_S = np.array([F_hand_B, F_contact_B, body_B, tau_hand_B, omega_B, alpha_B]) @ R_BS
-        F_h, F_c, body, tau_h, omega, alpha = rows_S
-        f = F_h + F_c + body
-        tau = (
-            tau_h
-            + self._arms @ rows_S[:3].reshape(9)
-            - (self._inertia * alpha + cross3(omega, self._inertia * omega))
+        f = rows_S[:3].sum(axis=0)
+        F_c, tau_h = rows_S[1], rows_S[3]
+        # I α + ω × I ω with the diagonal inertia of S, in plain floats (three components)
+        ix, iy, iz = self._inertia_floats
+        wx, wy, wz = rows_S[4].tolist()
+        ax, ay, az = rows_S[5].tolist()
+        inertial = (
+            ix * ax + (iz - iy) * wy * wz,
+            iy * ay + (ix - iz) * wz * wx,
+            iz * az + (iy - ix) * wx * wy,
         )
+        tau = tau_h + self._arms @ rows_S[:3].reshape(9) - inertial
         if F_cable_B is not None:
             F_k = R_BS.T @ F_cable_B
             f = f + F_k

@@ -170,8 +170,8 @@ class UR5Model:
 
     def placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
         """(p_BX_B, R_BX) of a frame after `update`."""
-        M = self.data.oMf[self.frame_ids[frame]]
-        return M.translation.copy(), M.rotation.copy()
+        H = self.data.oMf[self.frame_ids[frame]].homogeneous  # a fresh 4x4 array
+        return H[:3, 3], H[:3, :3]
 
     def twist(self, frame: str) -> np.ndarray:
         """[v; ω] of a frame's origin in the base frame (speedL's convention), after `update`."""

@@ -2,7 +2,7 @@
 
 User mistakes (a bad parameter, a bad file, a pose set that cannot be identified) are `HohError`
 subclasses whose message is a single line fit to show without a traceback; the command line turns
-them into exit status 2.
+them into exit status 2. A run that fails although its input was right raises `RunError`: exit 1.
 """
 
 from __future__ import annotations
@@ -31,3 +31,8 @@ class InputFileError(HohError, ValueError):
 class IdentificationError(HohError, ValueError):
     """The data cannot identify the parameters (too few poses, orientations too alike) or the
     result is physically implausible."""
+
+
+class RunError(HohError, RuntimeError):
+    """The run itself failed (an FMU reported an error, a block raised, an FMU would not build):
+    the command line's exit status 1, not 2, since the input was fine."""

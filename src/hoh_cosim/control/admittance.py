@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -82,6 +82,14 @@ class AdmittanceGains:
     slope, deadband: α [m/(s·N)] and η [N] of eq. 10 (also used by the isotropic law).
     sigmoid_max_speed [m/s], sigmoid_midpoint [N], sigmoid_steepness [1/N]: the sigmoid law.
     """
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "slope": "m/(s.N)",
+        "deadband": "N",
+        "sigmoid_max_speed": "m/s",
+        "sigmoid_midpoint": "N",
+        "sigmoid_steepness": "1/N",
+    }
 
     law: LawName = "deadband_linear"
     slope: Vec3 = field(default_factory=lambda: frozen([0.0125, 0.0125, 0.0125]))

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy import signal
@@ -55,6 +56,8 @@ class ZeroOrderHold:
 
 @dataclass(frozen=True)
 class ButterworthParams:
+    UNITS: ClassVar[dict[str, Any]] = {"order": "1", "cutoff_hz": "Hz"}
+
     order: int = 5  # seed Fig. 19
     cutoff_hz: float = 5.0  # seed Fig. 19
 
@@ -115,6 +118,8 @@ class ButterworthFilter:
 class OneEuroParams:
     """1€ tuning (Casiez et al. 2012): `min_cutoff_hz` sets the smoothing at rest, `beta` how fast the
     cutoff rises with speed, `d_cutoff_hz` the smoothing of the speed estimate."""
+
+    UNITS: ClassVar[dict[str, Any]] = {"min_cutoff_hz": "Hz", "beta": "1/N", "d_cutoff_hz": "Hz"}
 
     min_cutoff_hz: float = 1.0
     beta: float = 0.05

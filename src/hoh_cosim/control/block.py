@@ -4,10 +4,16 @@ A block keeps its parameters in a frozen, validated dataclass and its state expl
 clock, sleeps, does I/O or knows FMI: `step(t, dt, inputs)` gets the master's time (an integer tick
 times dt) and a mapping from input port names to float arrays, and returns the outputs the same way.
 The FMU wrappers, the in-process engine and the hardware runner are adapters of that one shape.
+
+The input arrays belong to the caller and are refilled in place every step: a block reads them
+during `step` and neither changes them nor keeps them. The caller copies the output arrays it keeps;
+a block may return the same array objects again while their values stay the same, and never changes
+an array after returning it.
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
@@ -17,7 +23,15 @@ import numpy as np
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["WRENCH_UNITS", "Block", "Port", "check_inputs", "zero_inputs"]
+__all__ = [
+    "WRENCH_UNITS",
+    "Block",
+    "Port",
+    "check_inputs",
+    "make_block",
+    "takes_rng",
+    "zero_inputs",
+]
 
 WRENCH_UNITS = ("N", "N", "N", "N.m", "N.m", "N.m")
 
@@ -79,3 +93,15 @@ def check_inputs(block: Block, inputs: Mapping[str, object]) -> dict[str, Vec]:
 def zero_inputs(block: Block) -> dict[str, Vec]:
     """A zero array for every input port of `block`."""
     return {p.name: np.zeros(p.size) for p in block.inputs}
+
+
+def takes_rng(block_cls: type) -> bool:
+    """Whether a block draws random numbers: its constructor takes a generator `rng`."""
+    return "rng" in inspect.signature(block_cls).parameters
+
+
+def make_block(block_cls: type, params: object, seed: int) -> object:
+    """A block of `block_cls` with `params`; its random numbers, if any, seeded with `seed`."""
+    if takes_rng(block_cls):
+        return block_cls(params, rng=np.random.default_rng(seed))
+    return block_cls(params)

@@ -20,7 +20,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -63,6 +63,29 @@ _STOP = int(STOP_FLAGS)
 
 @dataclass(frozen=True)
 class ControllerParams:
+    UNITS: ClassVar[dict[str, Any]] = {
+        "rotation.slope": "rad/(s.N.m)",
+        "rotation.deadband": "N.m",
+        "rotation.sigmoid_max_speed": "rad/s",
+        "rotation.sigmoid_midpoint": "N.m",
+        "rotation.sigmoid_steepness": "1/(N.m)",
+        "fixture_threshold_N": "N",
+        "fixture_up_B": "1",
+        "ft_period_s": "s",
+        "probe_period_s": "s",
+    }
+    TUNABLE: ClassVar[frozenset[str]] = frozenset(
+        {
+            "translation",
+            "rotation",
+            "contact_compensation",
+            "virtual_fixture",
+            "fixture_threshold_N",
+            "fixture_up_B",
+            "limits",
+        }
+    )
+
     translation: AdmittanceGains = TRANSLATION_GAINS
     rotation: AdmittanceGains = ROTATION_GAINS
     contact_compensation: bool = True  # eq. 11–12
@@ -116,14 +139,21 @@ class HandGuidingController:
     )
 
     def __init__(self, params: ControllerParams | None = None) -> None:
-        self.params = p = params or ControllerParams()
+        self.retune(params or ControllerParams())
+        self.reset()
+
+    def retune(self, params: ControllerParams) -> None:
+        """New parameters without losing the state (latched stops, the last command)."""
+        self.params = params
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
-        tr, rot = p.translation, p.rotation
+        tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None
         if tr.law == rot.law and tr.law != "isotropic":
             self._law6 = _stack_gains(tr, rot)
-        self._box = (p.limits.workspace_min_B.tolist(), p.limits.workspace_max_B.tolist())
-        self.reset()
+        self._box = (
+            params.limits.workspace_min_B.tolist(),
+            params.limits.workspace_max_B.tolist(),
+        )
 
     def reset(self) -> None:
         """Clear the latched stops and the previous command."""

@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal, Protocol
+from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
@@ -40,7 +40,7 @@ from hoh_cosim.control.baselines import (
     ZeroOrderHold,
 )
 from hoh_cosim.control.block import WRENCH_UNITS, Port
-from hoh_cosim.control.frames import R_SP_SEED
+from hoh_cosim.control.frames import R_BS_EQ1, R_SP_SEED
 from hoh_cosim.control.gravity import SEED_TOOL, GravityModel, ToolParams
 from hoh_cosim.control.kalman import KalmanBank, KalmanParams, SteadyStateForceKalman
 from hoh_cosim.control.vectors import (
@@ -59,6 +59,8 @@ from hoh_cosim.errors import ConfigError
 __all__ = [
     "FILTER_KINDS",
     "FT150_NOISE_MAX",
+    "FT150_NOISE_MAX_S",
+    "FT150_TORQUE_NOISE_MAX_S",
     "Estimator",
     "EstimatorParams",
     "FilterBank",
@@ -71,9 +73,12 @@ FilterKind = Literal["kalman", "steady_kalman", "butterworth", "one_euro", "none
 FILTER_KINDS: tuple[str, ...] = ("kalman", "steady_kalman", "butterworth", "one_euro", "none")
 
 FT150_NOISE_MAX = frozen([1.15, 1.06, 0.31])
-"""[N] The seed's static FT-150 noise, max |noise| on x, y, z (section 4.C)."""
-FT150_TORQUE_NOISE_MAX = frozen(0.05 * FT150_NOISE_MAX)
-"""[N·m] Assumed: the seed reports no torque noise; the force noise on a 5 cm lever."""
+"""[N] The seed's static FT-150 noise, max |noise| on x, y, z (section 4.C). The seed aligned before it
+filtered (Fig. 5), so these are base-frame axes at its home pose."""
+FT150_NOISE_MAX_S = frozen(np.abs(R_BS_EQ1.T) @ FT150_NOISE_MAX)
+"""[N] The same per sensor axis: eq. 1 puts the sensor's y along base x, so (1.06, 1.15, 0.31)."""
+FT150_TORQUE_NOISE_MAX_S = frozen(0.05 * FT150_NOISE_MAX_S)
+"""[N·m] Assumed per sensor axis: the seed reports no torque noise; the force noise on a 5 cm lever."""
 FSE103_NOISE_MAX = frozen([0.15, 0.15, 0.15])
 """[N] Assumed: the seed reports no FSE103 noise figure."""
 NOISE_MAX_PER_SIGMA = 3.5
@@ -112,6 +117,23 @@ class FilterBank(Protocol):
 class EstimatorParams:
     """Everything the estimator needs to know about the tool, the sensors and the filters."""
 
+    UNITS: ClassVar[dict[str, Any]] = {
+        "g_B": "m/s2",
+        "R_SP": "1",
+        "p_SR_S": "m",
+        "probe_mass_kg": "kg",
+        "ft_rebias_packets": "1",
+        "probe_rebias_packets": "1",
+        "ft_bias": ("N", "N", "N", "N.m", "N.m", "N.m"),
+        "probe_bias": "N",
+        "hand_torque_kalman.q": "N2.m2/s5",
+        "hand_torque_kalman.r": "N2.m2",
+        "hand_torque_kalman.p0": ("N2.m2", "N2.m2/s2", "N2.m2/s4"),
+        "one_euro_torque.beta": "1/(N.m)",
+        "ft_packet_period_s": "s",
+        "probe_packet_period_s": "s",
+    }
+
     tool: ToolParams = SEED_TOOL
     g_B: Vec3 = field(default_factory=lambda: GRAVITY_B.copy())  # [m/s²]
     R_SP: Rot3 = field(default_factory=lambda: R_SP_SEED.copy())  # probe sensor P in wrist sensor S
@@ -123,9 +145,11 @@ class EstimatorParams:
     ft_bias: Wrench = field(default_factory=lambda: frozen(np.zeros(6)))  # [N, N·m]
     probe_bias: Vec3 = field(default_factory=lambda: frozen(np.zeros(3)))  # [N]
     filter: FilterKind = "kalman"
-    hand_force_kalman: KalmanParams = field(default_factory=lambda: default_kalman(FT150_NOISE_MAX))
+    hand_force_kalman: KalmanParams = field(
+        default_factory=lambda: default_kalman(FT150_NOISE_MAX_S)
+    )
     hand_torque_kalman: KalmanParams = field(
-        default_factory=lambda: default_kalman(FT150_TORQUE_NOISE_MAX)
+        default_factory=lambda: default_kalman(FT150_TORQUE_NOISE_MAX_S)
     )
     probe_force_kalman: KalmanParams = field(
         default_factory=lambda: default_kalman(FSE103_NOISE_MAX)
@@ -385,8 +409,9 @@ class Estimator:
                 measurements = (None, None, probe_z)
             F_S, tau_S, F_P = self._filters.step_bank(dt, measurements).reshape(3, 3)
             # one product turns all four vectors into B: columns F_hand, τ_hand, F_probe, F_meas
-            in_S = np.vstack([F_S, tau_S, self.params.R_SP @ F_P, self._F_meas_S])
-            F_hand_B, tau_hand_B, F_probe_B, F_meas_B = (R_BS @ in_S.T).T
+            # as rows: v_B = R_BS v_S  <=>  row_B = row_S R_BSᵀ
+            in_S = np.array([F_S, tau_S, self.params.R_SP @ F_P, self._F_meas_S])
+            F_hand_B, tau_hand_B, F_probe_B, F_meas_B = in_S @ R_BS.T
             if not self.params.use_probe:
                 F_probe_B = np.zeros(3)
             ready = 1.0

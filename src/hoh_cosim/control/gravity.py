@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -65,6 +66,8 @@ alike for the data to separate the parameters, whatever the standard errors clai
 @dataclass(frozen=True)
 class ToolParams:
     """What hangs below the wrist sensor: its mass and centre of mass."""
+
+    UNITS: ClassVar[dict[str, Any]] = {"mass_kg": "kg", "p_SC_S": "m"}
 
     mass_kg: float  # [kg] probe + housing (+ probe sensor)
     p_SC_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 0.0]))  # [m] from S, in S

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 from filterpy.common import Q_discrete_white_noise
@@ -62,6 +63,8 @@ class KalmanParams:
     r: [N²] per axis, the variance of the sensor's noise. Larger r trusts the sensor less.
     p0: initial variance of (force [N²], rate [N²/s²], acceleration [N²/s⁴]) on every axis.
     """
+
+    UNITS: ClassVar[dict[str, Any]] = {"q": "N2/s5", "r": "N2", "p0": ("N2", "N2/s2", "N2/s4")}
 
     q: Vec3
     r: Vec3
@@ -159,23 +162,61 @@ class KalmanBank:
 
     def reset(self) -> None:
         self.x = np.zeros((3 * len(self.channels), 3))  # per axis: force, rate, acceleration
-        self.P = self._P0.copy()
+        self._P = self._P0.copy()
+        self._owed = 0  # covariance predictions not applied yet
+
+    @property
+    def P(self) -> Vec:
+        """The covariance, (3·n, 3, 3), with every prediction so far applied."""
+        self._catch_up()
+        return self._P
+
+    @P.setter
+    def P(self, value: Vec) -> None:
+        self._P = value
+        self._owed = 0
 
     def _model(self, dt: float) -> None:
         if dt != self._dt:
             self._F = axis_transition(dt)
-            self._FF = np.kron(self._F, self._F)
+            self._Ft = self._F.T.copy()
             self._Q = process_noise(dt, self._q)
+            self._powers: dict[int, tuple[Vec, Vec, Vec]] = {}
             self._dt = dt
 
+    def _power(self, k: int) -> tuple[Vec, Vec, Vec]:
+        """(Fᵏ, kron(Fᵏ, Fᵏ), Qₖ = Σᵢ₌₀ᵏ⁻¹ Fⁱ Q Fⁱᵀ): k predictions of the covariance at once."""
+        cached = self._powers.get(k)
+        if cached is None:
+            if k == 1:
+                Fk, Qk = self._F, self._Q
+            else:
+                Fp, _, Qp = self._power(k - 1)
+                Fk, Qk = self._F @ Fp, self._F @ Qp @ self._F.T + self._Q
+            cached = self._powers[k] = (Fk, np.kron(Fk, Fk), Qk)
+        return cached
+
+    def _catch_up(self) -> None:
+        """Apply the owed predictions: P⁻ = Fᵏ P Fᵏᵀ + Qₖ, the same as k single predictions."""
+        if self._owed:
+            Fk, FFk, Qk = self._power(self._owed)
+            _, self._P = predict(self.x, self._P, Fk, Qk, FFk)
+            self._owed = 0
+
     def step_bank(self, dt: float, measurements: Sequence[Vec3 | None]) -> Vec:
-        """Predict all channels, correct those with a reading; the forces of every axis, (3·n,)."""
+        """Predict all channels, correct those with a reading; the forces of every axis, (3·n,).
+
+        The state is predicted every tick; its covariance is needed only to correct, so its
+        predictions are owed and applied together when a reading arrives.
+        """
         self._model(dt)
-        self.x, self.P = predict(self.x, self.P, self._F, self._Q, self._FF)
+        self.x = self.x @ self._Ft
+        self._owed += 1
         pattern = tuple([z is not None for z in measurements])
         if any(pattern):
+            self._catch_up()
             z = np.concatenate([self._ZERO3 if zi is None else zi for zi in measurements])
-            self.x, self.P = update(self.x, self.P, z, self._r, self._mask(pattern))
+            self.x, self._P = update(self.x, self._P, z, self._r, self._mask(pattern))
         return self.x[:, 0].copy()
 
     _ZERO3 = frozen(np.zeros(3))

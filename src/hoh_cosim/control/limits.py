@@ -17,6 +17,7 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -82,6 +83,18 @@ _DESCRIPTIONS = {
 
 @dataclass(frozen=True)
 class LimitParams:
+    UNITS: ClassVar[dict[str, Any]] = {
+        "max_linear_speed": "m/s",
+        "max_angular_speed": "rad/s",
+        "max_linear_accel": "m/s2",
+        "max_angular_accel": "rad/s2",
+        "workspace_min_B": "m",
+        "workspace_max_B": "m",
+        "probe_force_soft_cap": "N",
+        "probe_force_stop": "N",
+        "stale_periods": "1",
+    }
+
     max_linear_speed: float = 0.10  # [m/s] DESIGN.md §7
     max_angular_speed: float = 0.5  # [rad/s] ~29°/s, a brisk wrist turn
     max_linear_accel: float = 1.0  # [m/s²] 0.1 m/s reached or shed in 0.1 s
