@@ -1,0 +1,476 @@
+"""The master: steps a scenario's components, through FMUs or in-process, and records every output.
+
+One stepping loop serves both engines, so the two can only differ in how a component is stepped:
+
+    for tick k (t = k · dt):
+        apply the scenario events due at t
+        for each component in the scenario's order, if k is a multiple of its `every`:
+            inputs <- the latest outputs they are connected to (one numpy gather)
+            step the component from t to t + every · dt
+        record every output (row k + 1, time t + dt)
+
+Components earlier in the order see this tick's outputs of those before them; the others, last
+tick's. With the standard order (operator, plant, sensors, estimator, controller) that makes one tick
+of delay in the feedback from the controller to the plant (on top of the robot's own cycle of
+latency), and none along the forward path from the hand to the command.
+
+Buffers are flat float arrays: every component's outputs are a view into one array, each input buffer
+is filled with one `np.take` from precomputed indices (scenario input values sit in a constants area
+at the end of that array). The FMU runtime then calls fmpy's raw `fmi2SetReal`, `fmi2DoStep` and
+`fmi2GetReal` with pointers into those buffers: one batched set and one batched get per FMU per step,
+all from the main thread, every status checked.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import ctypes
+import math
+import shutil
+import sys
+import tempfile
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from hoh_cosim.control.block import make_block
+from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
+from hoh_cosim.errors import ConfigError, RunError
+from hoh_cosim.fmi import exit_fix
+from hoh_cosim.params import leaves
+
+__all__ = ["ENGINES", "Recording", "simulate"]
+
+ENGINES = ("fmu", "inprocess")
+
+
+@dataclass
+class Recording:
+    """Every output of every component at every tick, and how long the run took."""
+
+    time: np.ndarray  # (n + 1,)
+    values: np.ndarray  # (n + 1, total outputs)
+    columns: dict[str, slice]  # "component.port" -> columns
+    element_names: dict[str, list[str]]  # "component.port" -> its CSV column names
+    wall_s: float
+    engine: str
+
+    def __getitem__(self, signal: str) -> np.ndarray:
+        """`component.port` as an (n + 1, size) array."""
+        return self.values[:, self.columns[signal]]
+
+    def __contains__(self, signal: str) -> bool:
+        return signal in self.columns
+
+
+class Runtime(Protocol):
+    spec: ComponentSpec
+    in_buf: np.ndarray
+
+    def bind(self, outputs: np.ndarray) -> None: ...
+    def initialize(self) -> None: ...
+    def step(self, t: float, dt: float) -> None: ...
+    def retune(self, params: Any, changes: dict[str, Any]) -> None: ...
+    def close(self) -> None: ...
+
+
+def _element_names(name: str, size: int) -> list[str]:
+    return [name] if size == 1 else [f"{name}[{i + 1}]" for i in range(size)]
+
+
+class InProcessRuntime:
+    """A block stepped directly: the reference the FMUs must match."""
+
+    def __init__(self, spec: ComponentSpec) -> None:
+        self.spec = spec
+        self.block = make_block(spec.kind.block, spec.params, spec.seed)
+        self.in_buf = np.zeros(sum(p.size for p in spec.inputs))
+        # views into the input buffer, refilled in place every step (see the block contract)
+        self._inputs = {name: self.in_buf[sl] for name, sl in _slices(spec.inputs)}
+        self._outputs = _slices(spec.outputs)
+
+    def bind(self, outputs: np.ndarray) -> None:
+        self.out = outputs
+        self._out_views = [(name, outputs[sl]) for name, sl in self._outputs]
+
+    def initialize(self) -> None:
+        initial = getattr(self.block, "initial_outputs", None)
+        if initial is not None:
+            self._write(initial())
+
+    def _write(self, outputs: dict[str, np.ndarray]) -> None:
+        for name, view in self._out_views:
+            view[...] = outputs[name]
+
+    def step(self, t: float, dt: float) -> None:
+        self._write(self.block.step(t, dt, self._inputs))
+
+    def retune(self, params: Any, changes: dict[str, Any]) -> None:
+        self.block.retune(params)
+
+    def close(self) -> None:
+        pass
+
+
+def _slices(ports: Sequence[Any]) -> list[tuple[str, slice]]:
+    out, offset = [], 0
+    for port in ports:
+        out.append((port.name, slice(offset, offset + port.size)))
+        offset += port.size
+    return out
+
+
+class _FmuLog:
+    """Keeps the last messages every FMU logged, to name the cause when a call fails."""
+
+    def __init__(self) -> None:
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+        )
+
+        self.messages: deque[tuple[str, int, str]] = deque(maxlen=50)
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+
+    def _log(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+        self.messages.append(
+            (
+                (instance or b"").decode(errors="replace"),
+                status,
+                (message or b"").decode(errors="replace"),
+            )
+        )
+
+    def error(self, instance: str) -> str | None:
+        """The last error `instance` logged, if any."""
+        for name, status, message in reversed(self.messages):
+            if name == instance and status >= 3:
+                return " ".join(message.split())
+        return None
+
+    def last(self, instance: str) -> str:
+        for name, _, message in reversed(self.messages):
+            if name == instance:
+                return " ".join(message.split())
+        return "no message"
+
+
+_STATUS = {0: "OK", 1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal", 5: "Pending"}
+
+
+_EXTRACTED: dict[tuple[str, int, int], tuple[str, Any]] = {}
+
+
+def _extracted(fmu: Path) -> tuple[str, Any]:
+    """The FMU unpacked once per process, with its model description.
+
+    An FMU file is unpacked once and its library stays loaded: later runs instantiate it again
+    rather than load and unload it each time (pythonfmu's state is released at exit, see
+    `hoh_cosim.fmi.exit_fix`).
+    """
+    from fmpy import extract, read_model_description
+
+    stat = fmu.stat()
+    key = (str(fmu.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key not in _EXTRACTED:
+        directory = tempfile.mkdtemp(prefix=f"hoh-{fmu.stem}-")
+        atexit.register(shutil.rmtree, directory, ignore_errors=True)
+        _EXTRACTED[key] = (extract(str(fmu), unzipdir=directory), read_model_description(str(fmu)))
+    return _EXTRACTED[key]
+
+
+class FmuRuntime:
+    """A component as an FMU loaded, initialised and stepped through fmpy."""
+
+    def __init__(self, spec: ComponentSpec, fmu: Path, log: _FmuLog) -> None:
+        from fmpy.fmi2 import FMU2Slave
+
+        exit_fix.install()
+        self.spec = spec
+        self.log = log
+        self.fmu_path = fmu
+        try:
+            self._unzipped, md = _extracted(fmu)
+        except Exception as exc:  # not a zip, no modelDescription.xml, not FMI 2.0 ...
+            raise ConfigError(f"{fmu}: cannot read the FMU: {exc}") from None
+        self.fmu = FMU2Slave(
+            guid=md.guid,
+            unzipDirectory=self._unzipped,
+            modelIdentifier=md.coSimulation.modelIdentifier,
+            instanceName=spec.name,
+        )
+        self.vrs = {v.name: (v.valueReference, v.type) for v in md.modelVariables}
+        for port in (*spec.inputs, *spec.outputs):
+            for name in _element_names(port.name, port.size):
+                if self.vrs.get(name, (None, "Real"))[1] != "Real" or name not in self.vrs:
+                    raise ConfigError(
+                        f"{fmu}: has no Real variable {name!r}, which a {spec.kind.name} "
+                        f"component needs (port {port.name}[{port.size}])"
+                    )
+        self.in_buf = np.zeros(sum(p.size for p in spec.inputs))
+        self._in_vr = self._vr_array(
+            [n for p in spec.inputs for n in _element_names(p.name, p.size)]
+        )
+        self._out_vr = self._vr_array(
+            [n for p in spec.outputs for n in _element_names(p.name, p.size)]
+        )
+        self._in_ptr = self.in_buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        self._set = self.fmu._functions["fmi2SetReal"]
+        self._get = self.fmu._functions["fmi2GetReal"]
+        self._do_step = self.fmu._functions["fmi2DoStep"]
+        self.fmu.instantiate(callbacks=log.callbacks, loggingOn=True)
+        self._component = self.fmu.component
+        self._alive = True
+
+    def _vr_array(self, names: list[str]) -> Any:
+        return (ctypes.c_uint * len(names))(*[self.vrs[n][0] for n in names])
+
+    def _check(self, status: int, call: str, t: float | None = None) -> None:
+        if status > 1:
+            at = f" at t = {t:.6g} s" if t is not None else ""
+            raise RunError(
+                f"{self.spec.name} ({self.fmu.modelIdentifier}): {call}{at} returned "
+                f"{_STATUS.get(status, status)}: {self.log.last(self.spec.name)}"
+            )
+
+    def _set_leaves(self, values: dict[str, Any]) -> None:
+        by_type: dict[str, tuple[list[int], list[Any]]] = {}
+        for name, value in values.items():
+            if name not in self.vrs:
+                raise ConfigError(
+                    f"{self.fmu_path}: has no parameter {name!r}, which the scenario sets "
+                    f"for {self.spec.name}"
+                )
+            vr, var_type = self.vrs[name]
+            vrs, vals = by_type.setdefault(var_type, ([], []))
+            vrs.append(vr)
+            vals.append(value)
+        setters = {
+            "Real": self.fmu.setReal,
+            "Integer": self.fmu.setInteger,
+            "Boolean": self.fmu.setBoolean,
+            "String": self.fmu.setString,
+        }
+        for var_type, (vrs, vals) in by_type.items():
+            try:
+                setters[var_type](vrs, vals)
+            except Exception as exc:  # fmpy raises on a failed status
+                raise RunError(
+                    f"{self.spec.name}: setting parameters failed: "
+                    f"{self.log.last(self.spec.name) or exc}"
+                ) from None
+
+    def bind(self, outputs: np.ndarray) -> None:
+        self.out = outputs
+        self._out_ptr = outputs.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+    def initialize(self) -> None:
+        values = {leaf.name: leaf.value for leaf in leaves(self.spec.params)}
+        if "seed" in self.vrs:
+            values["seed"] = self.spec.seed
+        self._set_leaves(values)
+        try:
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+            self.fmu.exitInitializationMode()
+        except Exception:
+            raise RunError(
+                f"{self.spec.name}: initialisation failed: {self.log.last(self.spec.name)}"
+            ) from None
+        error = self.log.error(self.spec.name)
+        if error is not None:  # our FMUs log a failure and carry on; stop here
+            raise RunError(f"{self.spec.name} ({self.fmu.modelIdentifier}): {error}")
+        self._check(
+            self._get(self._component, self._out_vr, len(self._out_vr), self._out_ptr),
+            "fmi2GetReal",
+        )
+
+    def step(self, t: float, dt: float) -> None:
+        c = self._component
+        status = self._set(c, self._in_vr, len(self._in_vr), self._in_ptr)
+        if status > 1:
+            self._check(status, "fmi2SetReal", t)
+        status = self._do_step(c, t, dt, 1)
+        if status > 1:
+            self._check(status, "fmi2DoStep", t)
+        status = self._get(c, self._out_vr, len(self._out_vr), self._out_ptr)
+        if status > 1:
+            self._check(status, "fmi2GetReal", t)
+
+    def retune(self, params: Any, changes: dict[str, Any]) -> None:
+        self._set_leaves(changes)
+
+    def close(self) -> None:
+        if self._alive:
+            self._alive = False
+            with contextlib.suppress(Exception):  # a failed FMU may refuse; free it anyway
+                self.fmu.terminate()
+            # the instance only: fmpy's freeInstance() would unload the library too, which stays
+            # loaded for the next run (see _extracted)
+            self.fmu.fmi2FreeInstance(self.fmu.component)
+
+
+class _Progress:
+    """A one-line progress bar on a terminal, for runs that take more than a couple of seconds."""
+
+    def __init__(self, name: str, duration: float, enabled: bool) -> None:
+        self.name, self.duration = name, duration
+        self.enabled = enabled and sys.stderr.isatty()
+        self.start = time.perf_counter()
+        self.last = self.start
+        self.shown = False
+
+    def update(self, t: float) -> None:
+        now = time.perf_counter()
+        if not self.enabled or now - self.last < 0.5 or now - self.start < 2.0:
+            return
+        self.last, self.shown = now, True
+        done = t / self.duration
+        bar = "#" * int(30 * done)
+        rtf = t / (now - self.start)
+        sys.stderr.write(
+            f"\r{self.name} [{bar:<30}] {100 * done:5.1f}% {t:.1f}/{self.duration:.1f}"
+            f" s  x{rtf:.1f} real time"
+        )
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.shown:
+            sys.stderr.write("\r" + " " * 79 + "\r")
+            sys.stderr.flush()
+
+
+def simulate(
+    scenario: Scenario,
+    engine: str = "fmu",
+    *,
+    fmu_paths: dict[str, Path] | None = None,
+    progress: bool = True,
+    observer: Callable[[int, float], None] | None = None,
+) -> Recording:
+    """Run `scenario` with `engine` ("fmu" or "inprocess") and record every output."""
+    if engine not in ENGINES:
+        raise ConfigError(f"--engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
+    components = list(scenario.components.values())
+    runtimes: list[Runtime] = []
+    try:
+        if engine == "fmu":
+            if fmu_paths is None:
+                from hoh_cosim.fmi.build import ensure_fmus
+
+                fmu_paths = ensure_fmus(sorted({c.kind.name for c in components if c.fmu is None}))
+            log = _FmuLog()
+            runtimes = [FmuRuntime(c, c.fmu or fmu_paths[c.kind.name], log) for c in components]
+        else:
+            runtimes = [InProcessRuntime(c) for c in components]
+        return _run(scenario, engine, runtimes, progress, observer)
+    finally:
+        for runtime in runtimes:
+            runtime.close()
+
+
+def _run(
+    scenario: Scenario,
+    engine: str,
+    runtimes: list[Runtime],
+    progress: bool,
+    observer: Callable[[int, float], None] | None,
+) -> Recording:
+    # one array for every output, then the constant input values
+    columns: dict[str, slice] = {}
+    names: dict[str, list[str]] = {}
+    offset = 0
+    for rt in runtimes:
+        for port in rt.spec.outputs:
+            key = f"{rt.spec.name}.{port.name}"
+            columns[key] = slice(offset, offset + port.size)
+            names[key] = [f"{rt.spec.name}.{n}" for n in _element_names(port.name, port.size)]
+            offset += port.size
+    n_outputs = offset
+    constants = [v for v in scenario.input_defaults.values()]
+    n_const = sum(v.size for v in constants)
+    store = np.zeros(n_outputs + n_const)
+    const_at: dict[tuple[str, str], int] = {}
+    for key, value in scenario.input_defaults.items():
+        const_at[key] = offset
+        store[offset : offset + value.size] = value
+        offset += value.size
+    for rt in runtimes:
+        start = columns[f"{rt.spec.name}.{rt.spec.outputs[0].name}"].start
+        rt.bind(store[start : start + sum(p.size for p in rt.spec.outputs)])
+
+    # every input element's source in `store`
+    gather: list[np.ndarray] = []
+    for rt in runtimes:
+        index = np.full(rt.in_buf.size, -1, dtype=np.intp)
+        port_offset = dict((name, sl.start) for name, sl in _slices(rt.spec.inputs))
+        for (comp, port), at in const_at.items():
+            if comp == rt.spec.name:
+                size = next(p.size for p in rt.spec.inputs if p.name == port)
+                index[port_offset[port] : port_offset[port] + size] = np.arange(at, at + size)
+        for conn in scenario.connections:
+            if conn.dst != rt.spec.name:
+                continue
+            src = columns[f"{conn.src}.{conn.src_port}"].start
+            for s, d in zip(conn.src_elements, conn.dst_elements, strict=True):
+                index[port_offset[conn.dst_port] + d] = src + s
+        if np.any(index < 0):
+            raise RunError(f"{scenario.path}: an input of {rt.spec.name} has no source")
+        gather.append(index)
+
+    for rt in runtimes:
+        rt.initialize()
+    n = scenario.n_ticks
+    dt = scenario.dt_s
+    values = np.empty((n + 1, n_outputs))
+    outputs = store[:n_outputs]
+    values[0] = outputs
+    events = deque(sorted(scenario.events, key=lambda e: e.time_s))
+    by_name = {rt.spec.name: rt for rt in runtimes}
+    plan = [
+        (rt, rt.spec.every, rt.spec.every * dt, gather[i], rt.in_buf)
+        for i, rt in enumerate(runtimes)
+    ]
+    bar = _Progress(scenario.name, scenario.duration_s, progress)
+    start = time.perf_counter()
+    take = store.take
+    try:
+        for k in range(n):
+            t = k * dt
+            while events and events[0].time_s <= t + 0.5 * dt:
+                event = events.popleft()
+                by_name[event.component].retune(event.params, event.changes)
+            for rt, every, step, index, buf in plan:
+                if k % every == 0:
+                    take(index, out=buf)
+                    rt.step(t, step)
+            values[k + 1] = outputs
+            if observer is not None:
+                observer(k, t)
+            if k % 1000 == 0:
+                bar.update(t)
+    except RunError:
+        raise
+    except Exception as exc:
+        raise RunError(
+            f"{scenario.path}: the run failed at t = {t:.6g} s: {type(exc).__name__}: {exc}"
+        ) from exc
+    finally:
+        bar.close()
+    wall = time.perf_counter() - start
+    timeline = np.arange(n + 1) * dt
+    if not math.isfinite(wall):
+        wall = float("nan")
+    return Recording(timeline, values, columns, names, wall, engine)

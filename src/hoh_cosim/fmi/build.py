@@ -1,0 +1,176 @@
+"""Build the project's FMUs with pythonfmu, finish their model descriptions, cache them.
+
+`ensure_fmus` returns an up-to-date FMU for each component kind, building only what is missing or
+stale. An FMU is stale when its fingerprint changes: the hash of its entry script, every Python source
+of `hoh_cosim` and `plant_models` as installed, and the versions of pythonfmu and Python. The cache
+lives inside the project (`.fmu-cache/` beside `fmus/`) when we run from a checkout, otherwise in the
+user's cache directory; `HOH_COSIM_FMU_CACHE` overrides both.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import zipfile
+from collections.abc import Iterable
+from pathlib import Path
+
+import hoh_cosim
+import plant_models
+from hoh_cosim.cosim.components import KINDS
+from hoh_cosim.errors import HohError, RunError
+from hoh_cosim.fmi.model_description import finish_model_description
+from hoh_cosim.fmi.slave import block_interface
+
+__all__ = [
+    "build_fmu",
+    "default_cache_dir",
+    "ensure_fmus",
+    "fmu_name",
+    "fmu_scripts_dir",
+    "project_root",
+]
+
+
+def _checkout_fmus() -> Path | None:
+    """`fmus/` of the source checkout this package was imported from (editable installs)."""
+    candidate = Path(hoh_cosim.__file__).resolve().parents[2] / "fmus"
+    return candidate if (candidate / "hoh_estimator.py").is_file() else None
+
+
+def fmu_scripts_dir() -> Path:
+    """Where the FMU entry scripts are: the checkout's `fmus/`, else the copy in the package."""
+    checkout = _checkout_fmus()
+    if checkout is not None:
+        return checkout
+    packaged = Path(hoh_cosim.__file__).resolve().parent / "_fmus"
+    if (packaged / "hoh_estimator.py").is_file():
+        return packaged
+    raise HohError("the FMU entry scripts are missing: neither fmus/ nor hoh_cosim/_fmus exists")
+
+
+def project_root() -> Path | None:
+    """The project checkout we run from, if any: the checkout of the package, else the current
+    directory when it is one."""
+    checkout = _checkout_fmus()
+    if checkout is not None:
+        return checkout.parent
+    cwd = Path.cwd()
+    if (cwd / "fmus" / "hoh_estimator.py").is_file() and (cwd / "pyproject.toml").is_file():
+        return cwd
+    return None
+
+
+def default_cache_dir() -> Path:
+    if os.environ.get("HOH_COSIM_FMU_CACHE"):
+        return Path(os.environ["HOH_COSIM_FMU_CACHE"])
+    root = project_root()
+    if root is not None:
+        return root / ".fmu-cache"
+    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    return base / "hoh-cosim" / "fmus"
+
+
+def fmu_name(kind: str) -> str:
+    """The FMU's model identifier: the entry script's class name, e.g. HohEstimator."""
+    return "Hoh" + {"ft150": "FT150", "fse103": "FSE103"}.get(kind, kind.capitalize())
+
+
+def _fingerprint(script: Path) -> str:
+    import pythonfmu
+
+    digest = hashlib.sha256()
+    digest.update(script.read_bytes())
+    for package in (hoh_cosim, plant_models):
+        root = Path(package.__file__).resolve().parent
+        for path in sorted(root.rglob("*.py")):
+            digest.update(str(path.relative_to(root)).encode())
+            digest.update(path.read_bytes())
+    digest.update(f"pythonfmu {pythonfmu.__version__} python {platform.python_version()}".encode())
+    return digest.hexdigest()
+
+
+def _build(kind: str, script: Path, out: Path) -> None:
+    spec = KINDS[kind]
+    build_fmu(script, out, spec.block, spec.params, spec.description)
+
+
+def build_fmu(script: Path, out: Path, block: type, params: type, description: str) -> None:
+    """Build the FMU of the entry script `script` (a `BlockSlave` subclass wrapping `block` with
+    `params`) with pythonfmu, finish its model description, and put it at `out` atomically."""
+    from pythonfmu.builder import FmuBuilder
+
+    kind = block.__name__
+    with tempfile.TemporaryDirectory(prefix="hoh-fmu-") as tmp:
+        log = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+                built = Path(FmuBuilder.build_FMU(script, dest=tmp))
+        except Exception as exc:
+            output = " ".join(log.getvalue().split())[-300:]
+            raise RunError(
+                f"building the {kind} FMU from {script} failed: {type(exc).__name__}: {exc}"
+                + (f" (pythonfmu said: {output})" if output else "")
+            ) from None
+        specs = block_interface(block, params)
+        finished = Path(tmp) / "finished.fmu"
+        with (
+            zipfile.ZipFile(built) as src,
+            zipfile.ZipFile(finished, "w", zipfile.ZIP_DEFLATED) as dst,
+        ):
+            for item in src.infolist():
+                data = src.read(item)
+                if item.filename == "modelDescription.xml":
+                    data = finish_model_description(data, specs, description)
+                dst.writestr(item, data)
+        # a unique name beside the target, then one rename: a concurrent build or a reader never
+        # sees half a file
+        fd, part = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
+        os.close(fd)
+        try:
+            shutil.copyfile(finished, part)
+            os.replace(part, out)
+        except BaseException:
+            Path(part).unlink(missing_ok=True)
+            raise
+
+
+def ensure_fmus(
+    kinds: Iterable[str], cache_dir: Path | None = None, force: bool = False
+) -> dict[str, Path]:
+    """An up-to-date FMU for every kind, building the missing and the stale ones."""
+    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise HohError(f"{cache}: cannot create the FMU directory: {exc.strerror}") from None
+    scripts = fmu_scripts_dir()
+    paths: dict[str, Path] = {}
+    for kind in kinds:
+        script = scripts / f"{KINDS[kind].fmu_script}.py"
+        if not script.is_file():
+            raise HohError(f"{script}: missing: the entry script of the {kind} FMU")
+        out = cache / f"{fmu_name(kind)}.fmu"
+        stamp = out.with_suffix(".fmu.sha256")
+        fingerprint = _fingerprint(script)
+        if force or not out.is_file() or not stamp.is_file() or stamp.read_text() != fingerprint:
+            _build(kind, script, out)
+            stamp_part = stamp.with_name(f".{stamp.name}.{os.getpid()}")
+            stamp_part.write_text(fingerprint)
+            os.replace(stamp_part, stamp)
+        paths[kind] = out
+    return paths
+
+
+def _main(argv: list[str]) -> None:  # pragma: no cover - used through the CLI
+    ensure_fmus(KINDS, Path(argv[0]) if argv else None, force=True)
+
+
+if __name__ == "__main__":
+    _main(sys.argv[1:])

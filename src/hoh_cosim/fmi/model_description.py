@@ -1,0 +1,103 @@
+"""Fix what pythonfmu leaves out of `modelDescription.xml`, so the FMU validates with no problem.
+
+pythonfmu 0.7 writes the Outputs without dependencies, no InitialUnknowns, no units and no
+DefaultExperiment. We add:
+- UnitDefinitions for every unit used, with SI base units where the unit has an integer expansion,
+  and the `unit` attribute on every Real variable that has one;
+- the variables' descriptions;
+- Real start values written to round-trip exactly (pythonfmu writes 16 significant digits, one short
+  of a double's 17);
+- ModelStructure: every output in Outputs and in InitialUnknowns, each with `dependencies=""`. Our
+  outputs change only in fmi2DoStep, from the inputs held over the step (no direct feedthrough), and
+  at initialisation they come from the parameters alone, so they depend on no input at the same
+  instant. Importers may then connect FMUs in loops without algebraic loops;
+- a DefaultExperiment (0 to 10 s in 1 ms steps: the loop's tick).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from xml.etree import ElementTree as ET
+
+from hoh_cosim.fmi.slave import VariableSpec
+from hoh_cosim.fmi.units import base_units
+
+__all__ = ["DEFAULT_EXPERIMENT", "finish_model_description"]
+
+DEFAULT_EXPERIMENT = {"startTime": "0.0", "stopTime": "10.0", "stepSize": "0.001"}
+# fmiModelDescription's children, in the order the FMI 2.0 schema requires
+_ORDER = (
+    "ModelExchange",
+    "CoSimulation",
+    "UnitDefinitions",
+    "TypeDefinitions",
+    "LogCategories",
+    "DefaultExperiment",
+    "VendorAnnotations",
+    "ModelVariables",
+    "ModelStructure",
+)
+
+
+def _unit_element(name: str) -> ET.Element:
+    unit = ET.Element("Unit", {"name": name})
+    expansion = base_units(name)
+    if expansion is not None and (expansion[0] or expansion[1] != 1.0):
+        exponents, factor = expansion
+        attrib = {k: str(v) for k, v in exponents.items()}
+        if factor != 1.0:
+            attrib["factor"] = repr(factor)
+        ET.SubElement(unit, "BaseUnit", attrib)
+    return unit
+
+
+def finish_model_description(xml: bytes, specs: Sequence[VariableSpec], description: str) -> bytes:
+    """The completed model description for an FMU whose variables are `specs`."""
+    root = ET.fromstring(xml)
+    root.set("description", description)
+    by_name = {s.name: s for s in specs}
+    variables = root.find("ModelVariables")
+    if variables is None:
+        raise ValueError("modelDescription.xml has no ModelVariables")
+    units: list[str] = []
+    outputs: list[int] = []
+    for index, var in enumerate(variables.findall("ScalarVariable"), start=1):
+        spec = by_name[var.get("name", "")]
+        var.set("description", spec.description)
+        if spec.causality == "output":
+            outputs.append(index)
+        real = var.find("Real")
+        if real is not None and spec.unit is not None:
+            real.set("unit", spec.unit)
+            if spec.unit not in units:
+                units.append(spec.unit)
+        if real is not None and real.get("start") is not None and spec.start is not None:
+            real.set("start", repr(float(spec.start)))  # 17 digits: the exact default
+
+    for tag in ("UnitDefinitions", "DefaultExperiment", "ModelStructure"):
+        for old in root.findall(tag):
+            root.remove(old)
+    unit_definitions = ET.Element("UnitDefinitions")
+    for name in sorted(units):
+        unit_definitions.append(_unit_element(name))
+    structure = ET.Element("ModelStructure")
+    for tag in ("Outputs", "InitialUnknowns"):
+        node = ET.SubElement(structure, tag)
+        for index in outputs:
+            ET.SubElement(node, "Unknown", {"index": str(index), "dependencies": ""})
+    new = {
+        "ModelStructure": structure,
+        "DefaultExperiment": ET.Element("DefaultExperiment", DEFAULT_EXPERIMENT),
+    }
+    if units:  # the schema wants at least one Unit in UnitDefinitions
+        new["UnitDefinitions"] = unit_definitions
+    children = list(root)
+    for child in children:
+        root.remove(child)
+    present = {child.tag: child for child in children}
+    present.update(new)
+    for tag in _ORDER:
+        if tag in present:
+            root.append(present[tag])
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)

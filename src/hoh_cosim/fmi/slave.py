@@ -1,0 +1,310 @@
+"""One generic adapter from a block to a pythonfmu co-simulation slave.
+
+An FMU's entry script in `fmus/` only names the block and its parameter class:
+
+    from hoh_cosim.fmi.slave import BlockSlave as Fmi2Slave  # the wrapper finds "class X(Fmi2Slave):"
+
+    class HohEstimator(Fmi2Slave):
+        block = Estimator
+        params = EstimatorParams
+
+and the adapter does the rest, the same way for every block:
+- every element of every port becomes a Real variable (`wrench_S[1]` … `wrench_S[6]`, a scalar port
+  keeps its bare name), inputs with start 0, outputs calculated;
+- every parameter leaf (see `hoh_cosim.params`) becomes a parameter, tunable where the parameter
+  class says it may change while running, fixed otherwise; a block that draws random numbers gets an
+  Integer parameter `seed`;
+- the block is built when initialisation starts (and rebuilt if parameters change before it ends),
+  and its outputs are computed right away, so they are valid during initialisation;
+- `do_step` is read inputs -> `block.step(t, dt, inputs)` -> write outputs and nothing else; a tunable
+  parameter set between steps reaches the block through its `retune` before the next step.
+
+Reals come first in value-reference order (inputs, outputs, real parameters), so a value reference
+indexes one float array and get/set are single numpy operations instead of pythonfmu's per-variable
+Python loop.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from pythonfmu import Fmi2Slave as _PythonFmuSlave
+from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
+from pythonfmu.variables import Boolean, Integer, Real, String
+
+from hoh_cosim.control.block import make_block, takes_rng
+from hoh_cosim.errors import ConfigError
+from hoh_cosim.params import leaves, with_values
+
+__all__ = ["BlockSlave", "VariableSpec", "block_interface", "pin_namespace", "port_element_names"]
+
+VarType = Literal["Real", "Integer", "Boolean", "String"]
+_KIND_TO_TYPE: dict[str, VarType] = {
+    "real": "Real",
+    "integer": "Integer",
+    "boolean": "Boolean",
+    "string": "String",
+}
+
+
+@dataclass(frozen=True)
+class VariableSpec:
+    """One FMI scalar variable of a block's FMU, in value-reference order."""
+
+    name: str
+    type: VarType
+    causality: Literal["input", "output", "parameter"]
+    variability: Literal["continuous", "fixed", "tunable"]
+    start: float | int | bool | str | None
+    unit: str | None
+    description: str
+
+
+def port_element_names(name: str, size: int) -> list[str]:
+    """`name` for a scalar port, `name[1]` … `name[size]` otherwise (FMI structured naming)."""
+    return [name] if size == 1 else [f"{name}[{i + 1}]" for i in range(size)]
+
+
+def block_interface(block_cls: type, params_cls: type) -> list[VariableSpec]:
+    """Every FMI variable of the FMU wrapping `block_cls`, in value-reference order."""
+    specs: list[VariableSpec] = []
+    for causality, ports in (("input", block_cls.inputs), ("output", block_cls.outputs)):
+        for port in ports:
+            for element, unit in zip(
+                port_element_names(port.name, port.size), port.units, strict=True
+            ):
+                specs.append(
+                    VariableSpec(
+                        element,
+                        "Real",
+                        causality,
+                        "continuous",
+                        0.0 if causality == "input" else None,
+                        unit,
+                        port.description,
+                    )
+                )
+    params = leaves(params_cls())
+    extra = []
+    if takes_rng(block_cls):
+        extra.append(
+            VariableSpec(
+                "seed",
+                "Integer",
+                "parameter",
+                "fixed",
+                0,
+                "1",
+                "seed of the block's random numbers",
+            )
+        )
+    for var_type in ("Real", "Integer", "Boolean", "String"):
+        for leaf in params:
+            if _KIND_TO_TYPE[leaf.kind] == var_type:
+                specs.append(
+                    VariableSpec(
+                        leaf.name,
+                        var_type,
+                        "parameter",
+                        "tunable" if leaf.tunable else "fixed",
+                        leaf.value,
+                        leaf.unit,
+                        f"parameter of {params_cls.__name__}",
+                    )
+                )
+        specs.extend(s for s in extra if s.type == var_type)
+    names = [s.name for s in specs]
+    duplicates = {n for n in names if names.count(n) > 1}
+    if duplicates:
+        raise ConfigError(f"{block_cls.__name__}: variable names used twice: {sorted(duplicates)}")
+    return specs
+
+
+_CAUSALITY = {
+    "input": Fmi2Causality.input,
+    "output": Fmi2Causality.output,
+    "parameter": Fmi2Causality.parameter,
+}
+_VARIABILITY = {
+    "continuous": Fmi2Variability.continuous,
+    "fixed": Fmi2Variability.fixed,
+    "tunable": Fmi2Variability.tunable,
+}
+_VARIABLE_CLASS = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
+
+
+class BlockSlave(_PythonFmuSlave):
+    """The adapter; an entry script subclasses it and sets `block` and `params`."""
+
+    block: ClassVar[type]
+    params: ClassVar[type]
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        cls = type(self)
+        self.description = (cls.block.__doc__ or cls.block.__name__).strip().splitlines()[0]
+        self.specs = block_interface(cls.block, cls.params)
+        self._n_in = sum(p.size for p in cls.block.inputs)
+        self._n_io = self._n_in + sum(p.size for p in cls.block.outputs)
+        reals = [s for s in self.specs if s.type == "Real"]
+        self._reals = np.array([0.0 if s.start is None else s.start for s in reals], dtype=float)
+        self._others: dict[int, Any] = {}
+        for vr, spec in enumerate(self.specs):
+            var = _VARIABLE_CLASS[spec.type](
+                spec.name,
+                causality=_CAUSALITY[spec.causality],
+                variability=_VARIABILITY[spec.variability],
+                description=spec.description,
+            )
+            self.register_variable(var, nested=False)
+            if spec.type != "Real":
+                self._others[vr] = spec.start
+        self._param_names = {
+            vr: s.name
+            for vr, s in enumerate(self.specs)
+            if s.causality == "parameter" and s.name != "seed"
+        }
+        self._tunable = {vr for vr, s in enumerate(self.specs) if s.variability == "tunable"}
+        offset = 0
+        self._inputs: list[tuple[str, slice]] = []
+        for port in cls.block.inputs:
+            self._inputs.append((port.name, slice(offset, offset + port.size)))
+            offset += port.size
+        self._outputs: list[tuple[str, slice]] = []
+        for port in cls.block.outputs:
+            self._outputs.append((port.name, slice(offset, offset + port.size)))
+            offset += port.size
+        # views into the reals, refilled by set_real in place (see the block contract)
+        self._input_views = {name: self._reals[sl] for name, sl in self._inputs}
+        self._input_vrs = list(range(self._n_in))
+        self._output_vrs = list(range(self._n_in, self._n_io))
+        self._instance: Any = None
+        self._changed: set[int] = set()  # parameters set since the block was built
+        self._failure: str | None = None  # the first error, if any (see _fail)
+
+    # --- errors ------------------------------------------------------------------------------
+    #
+    # No exception may leave a method that pythonfmu 0.7.0 calls: on one it releases the instance's
+    # Python objects, and releases them again in fmi2FreeInstance, which corrupts the interpreter's
+    # memory (a crash later, in some unrelated garbage collection). So every failure is logged as an
+    # FMI error and remembered, and the next fmi2DoStep returns fmi2Discard.
+
+    def _fail(self, where: str, exc: BaseException) -> None:
+        message = f"{where}: {type(exc).__name__}: {exc}"
+        if self._failure is None:
+            self._failure = message
+        self.log(message, status=Fmi2Status.error)
+
+    # --- values ------------------------------------------------------------------------------
+
+    def get_real(self, vrs: list[int]) -> list[float]:
+        if vrs == self._output_vrs:  # what a master asks every step: a slice, not a gather
+            return self._reals[self._n_in : self._n_io].tolist()
+        try:
+            return self._reals[vrs].tolist()
+        except Exception as exc:
+            self._fail("fmi2GetReal", exc)
+            return [math.nan] * len(vrs)
+
+    def set_real(self, vrs: list[int], values: list[float]) -> None:
+        if vrs == self._input_vrs:  # every input, in order: what a master sets every step
+            self._reals[: self._n_in] = values
+            return
+        try:
+            self._reals[vrs] = values
+        except Exception as exc:
+            self._fail("fmi2SetReal", exc)
+            return
+        if max(vrs) >= self._n_io:
+            self._changed.update(vr for vr in vrs if vr >= self._n_io)
+
+    def _get_other(self, vrs: list[int]) -> list[Any]:
+        try:
+            return [self._others[vr] for vr in vrs]
+        except KeyError as exc:
+            self._fail("fmi2Get", ValueError(f"no such variable: value reference {exc}"))
+            return [0] * len(vrs)
+
+    def _set_other(self, vrs: list[int], values: list[Any]) -> None:
+        for vr, value in zip(vrs, values, strict=True):
+            if vr not in self._others:
+                self._fail("fmi2Set", ValueError(f"no such variable: value reference {vr}"))
+                return
+            self._others[vr] = value
+            self._changed.add(vr)
+
+    get_integer = get_boolean = get_string = _get_other
+    set_integer = set_boolean = set_string = _set_other
+
+    # --- life cycle --------------------------------------------------------------------------
+
+    def _parameters(self) -> Any:
+        values: dict[str, Any] = {}
+        for vr, name in self._param_names.items():
+            value = self._reals[vr] if vr < len(self._reals) else self._others[vr]
+            values[name] = value.item() if isinstance(value, np.generic) else value
+        return with_values(type(self).params(), values)
+
+    def _build(self) -> None:
+        try:
+            seed = next(
+                (self._others[vr] for vr, s in enumerate(self.specs) if s.name == "seed"), 0
+            )
+            self._instance = make_block(type(self).block, self._parameters(), int(seed))
+            self._changed.clear()
+            initial = getattr(self._instance, "initial_outputs", None)
+            if initial is not None:
+                self._write_outputs(initial())
+            if self._failure is not None and self._failure.startswith("initialisation"):
+                self._failure = None  # parameters fixed before initialisation ended
+        except Exception as exc:
+            self._instance = None
+            self._fail("initialisation", exc)
+
+    def _write_outputs(self, outputs: dict[str, np.ndarray]) -> None:
+        for name, sl in self._outputs:
+            self._reals[sl] = outputs[name]
+
+    def enter_initialization_mode(self) -> None:
+        self._build()
+
+    def exit_initialization_mode(self) -> None:
+        if self._changed:
+            self._build()
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        if self._failure is not None:  # a failed block is not stepped again
+            self.log(f"not stepped after an earlier error: {self._failure}", Fmi2Status.error)
+            return False
+        try:
+            if self._changed:
+                fixed = [self.specs[vr].name for vr in self._changed if vr not in self._tunable]
+                if fixed:
+                    raise ConfigError(
+                        f"fixed parameters cannot change after initialisation: {sorted(fixed)}"
+                    )
+                self._instance.retune(self._parameters())
+                self._changed.clear()
+            self._write_outputs(self._instance.step(current_time, step_size, self._input_views))
+        except Exception as exc:
+            self._fail(f"fmi2DoStep at t = {current_time:.6g} s", exc)
+            return False
+        return True
+
+
+def pin_namespace(namespace: dict[str, Any]) -> None:
+    """Balance pythonfmu 0.7.0's release of an FMU entry script's module namespace.
+
+    At every instantiation pythonfmu runs the entry script again in its module's namespace, to find
+    the slave class, and then releases a reference to that namespace it never owned
+    (`Py_DECREF(pGlobals)` on the borrowed result of `PyModule_GetDict`). Left alone, the second
+    `fmi2Instantiate` in a process crashes on the freed namespace. The script calls this at its top
+    level, so once per run: each call adds the one reference the release takes away, owned by
+    nobody, so that it is never given back either (holding references in a Python object instead
+    is undone at interpreter exit, which then frees the namespace twice).
+    """
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(namespace))
