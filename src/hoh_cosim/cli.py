@@ -1,6 +1,8 @@
 """The `hoh-cosim` command: a thin layer over the library.
 
-    hoh-cosim SCENARIO.yaml [options]          run a scenario
+    hoh-cosim SCENARIO.yaml [--out DIR] [--engine fmu|inprocess] [--duration S] [--seed N]
+                            [--set component.parameter=value ...]
+    hoh-cosim build-fmus [--out DIR]
     hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
 
 Exit status: 0 done; 2 the input is wrong (one line naming the file and the place); 1 the run failed.
@@ -11,17 +13,18 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
 from hoh_cosim import __version__
-from hoh_cosim.errors import HohError
+from hoh_cosim.errors import ConfigError, HohError, RunError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
-SUBCOMMANDS = ("identify-gravity",)
+SUBCOMMANDS = ("build-fmus", "identify-gravity")
 
 
 class _ArgumentParser(argparse.ArgumentParser):
@@ -53,6 +56,17 @@ def _main_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"hoh-cosim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_ArgumentParser)
 
+    build = sub.add_parser(
+        "build-fmus",
+        help="build every component's FMU",
+        description=(
+            "Build every component's FMI 2.0 co-simulation FMU with pythonfmu. Without --out, into "
+            "the cache a scenario run uses (only what is missing or out of date); with --out, all of "
+            "them afresh into DIR."
+        ),
+    )
+    build.add_argument("--out", metavar="DIR", help="where to put the .fmu files")
+
     ident = sub.add_parser(
         "identify-gravity",
         help="identify the tool's mass, centre of mass and sensor offsets from static poses",
@@ -79,14 +93,90 @@ def _main_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _run_scenario(argv: Sequence[str]) -> int:
-    scenario = argv[0]
-    print(
-        f"hoh-cosim: cannot run {scenario}: running scenarios is not available in hoh-cosim "
-        f"{__version__}; available commands: {', '.join(SUBCOMMANDS)}",
-        file=sys.stderr,
+def _scenario_parser() -> argparse.ArgumentParser:
+    parser = _ArgumentParser(
+        prog="hoh-cosim",
+        usage="hoh-cosim SCENARIO.yaml [options]",
+        description=(
+            "Run a co-simulation scenario and write signals.csv, summary.json and plots into "
+            "the output directory."
+        ),
+        epilog="Other commands: " + ", ".join(SUBCOMMANDS) + " (see hoh-cosim COMMAND --help).",
     )
-    return EXIT_BAD_INPUT
+    parser.add_argument("scenario", metavar="SCENARIO.yaml")
+    parser.add_argument(
+        "--out", metavar="DIR", help="results directory (default: runs/<scenario name>)"
+    )
+    parser.add_argument(
+        "--engine",
+        choices=("fmu", "inprocess"),
+        default="fmu",
+        help="step the components as FMUs through fmpy (default) or as Python blocks in-process",
+    )
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
+    )
+    parser.add_argument("--seed", type=int, metavar="N", help="seed instead of the scenario's")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="C.P=V",
+        help="set a parameter, e.g. controller.contact_compensation=false (repeatable)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar, no metric table")
+    return parser
+
+
+def _metric_text(value: object) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_metric_text(v) for v in value) + "]"
+    return "n/a" if value is None else str(value)
+
+
+def _run_scenario(argv: Sequence[str]) -> int:
+    from hoh_cosim.cosim.run import run_scenario
+
+    args = _scenario_parser().parse_args(argv)
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
+    result = run_scenario(
+        args.scenario,
+        out=args.out,
+        engine=args.engine,
+        duration_s=args.duration,
+        seed=args.seed,
+        overrides=args.overrides,
+        progress=not args.quiet,
+    )
+    for note in result.report.notes:
+        print(f"hoh-cosim: note: {note}", file=sys.stderr)
+    if not args.quiet:
+        s = result.summary
+        print(
+            f"{s['scenario']}: {s['duration_s']:g} s simulated in {s['wall_s']:.2f} s "
+            f"({_metric_text(s['realtime_factor'])}x real time, engine {s['engine']}, seed {s['seed']})"
+        )
+        width = max(len(k) for k in s["metrics"])
+        for key, value in s["metrics"].items():
+            if key not in ("wall_s", "realtime_factor"):
+                print(f"  {key:<{width}}  {_metric_text(value)}")
+    print(f"wrote {result.out}")
+    return EXIT_OK
+
+
+def _build_fmus(args: argparse.Namespace) -> int:
+    from hoh_cosim.cosim.components import KINDS
+    from hoh_cosim.fmi.build import default_cache_dir, ensure_fmus
+
+    out = Path(args.out) if args.out else default_cache_dir()
+    paths = ensure_fmus(KINDS, out, force=args.out is not None)
+    for kind, path in paths.items():
+        print(f"{kind:<11} {path}")
+    return EXIT_OK
 
 
 def _fmt(values: np.ndarray, digits: int = 5, signed: bool = True) -> str:
@@ -139,13 +229,25 @@ def _identify_gravity(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
+        return _main(argv)
+    except SystemExit as exc:  # argparse: --help, --version, a usage mistake
+        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+
+
+def _main(argv: list[str]) -> int:
+    try:
         if argv and not argv[0].startswith("-") and argv[0] not in SUBCOMMANDS:
             return _run_scenario(argv)
         args = _main_parser().parse_args(argv)
         if args.command == "identify-gravity":
             return _identify_gravity(args)
+        if args.command == "build-fmus":
+            return _build_fmus(args)
         _main_parser().print_help()
         return EXIT_BAD_INPUT
+    except RunError as exc:
+        print(f"hoh-cosim: {exc}", file=sys.stderr)
+        return EXIT_FAILED
     except HohError as exc:
         print(f"hoh-cosim: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -1,0 +1,230 @@
+"""The plots a person looks at after a run, one set per kind of scenario (seed 000, Fig. 16-21).
+
+Figures are drawn with matplotlib's Agg backend (no display needed) and returned as PNG bytes, so
+the caller decides where and how (atomically) they are written.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from hoh_cosim.cosim.engines import Recording
+from hoh_cosim.cosim.report import Report
+from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
+
+__all__ = ["render_plots"]
+
+AXES = ("x", "y", "z")
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _png(fig) -> bytes:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    _pyplot().close(fig)
+    return buffer.getvalue()
+
+
+def _get(rec: Recording, spec: ComponentSpec | None, port: str) -> np.ndarray | None:
+    if spec is None or f"{spec.name}.{port}" not in rec:
+        return None
+    return rec[f"{spec.name}.{port}"]
+
+
+def _circles(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    plt = _pyplot()
+    op = scenario.component_of_kind("operator")
+    plant = scenario.component_of_kind("plant")
+    est = scenario.component_of_kind("estimator")
+    out: dict[str, bytes] = {}
+    p, ref = _get(rec, plant, "p_BT_B"), _get(rec, op, "p_ref_B")
+    if p is not None and ref is not None and op is not None:
+        i, j = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}[op.params.plane]
+        active = rec.time >= op.params.start_s
+        fig, ax = plt.subplots(figsize=(5.5, 5.5))
+        ax.plot(1e3 * ref[active, i], 1e3 * ref[active, j], "k--", lw=1, label="hand's reference")
+        ax.plot(1e3 * p[active, i], 1e3 * p[active, j], lw=1, label="probe tip")
+        ax.set_xlabel(f"{AXES[i]} [mm]")
+        ax.set_ylabel(f"{AXES[j]} [mm]")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"path, RMS error {_fmt(report.metrics.get('path_rms_error_m'), 1e3, 'mm')}")
+        ax.legend(loc="best")
+        fig.tight_layout()
+        out["path.png"] = _png(fig)
+    hand, raw, filt = (
+        _get(rec, op, "F_hand_B"),
+        _get(rec, est, "F_hand_meas_B"),
+        _get(rec, est, "F_hand_B"),
+    )
+    if hand is not None and raw is not None and filt is not None and op is not None:
+        # one second in the middle of the drawing, like the seed's Fig. 20
+        mid = 0.5 * (op.params.start_s + op.params.ramp_s + rec.time[-1])
+        window = (rec.time >= mid - 0.5) & (rec.time <= mid + 0.5)
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
+        for k, ax in enumerate(axes):
+            t = rec.time[window]
+            ax.plot(t, hand[window, k], "k--", lw=1, label="true hand force")
+            ax.plot(t, raw[window, k], lw=0.8, drawstyle="steps-post", label="measured (held)")
+            ax.plot(t, filt[window, k], lw=1.2, label="filtered")
+            ax.set_ylabel(f"F_hand {AXES[k]} [N]")
+        axes[-1].set_xlabel("time [s]")
+        axes[0].legend(loc="upper right", fontsize=8)
+        axes[0].set_title(
+            f"hand force in B; filter lag {_fmt(report.metrics.get('filter_lag_ms'), 1, 'ms')}"
+        )
+        fig.tight_layout()
+        out["hand_force.png"] = _png(fig)
+    out.update(_command(scenario, rec))
+    return out
+
+
+def _command(scenario: Scenario, rec: Recording) -> dict[str, bytes]:
+    ctl = scenario.component_of_kind("controller")
+    plant = scenario.component_of_kind("plant")
+    command, actual = _get(rec, ctl, "twist_B"), _get(rec, plant, "twist_B")
+    if command is None or actual is None:
+        return {}
+    plt = _pyplot()
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6))
+    for k, ax in enumerate(axes):
+        ax.plot(rec.time, 1e3 * command[:, k], lw=0.8, label="commanded")
+        ax.plot(rec.time, 1e3 * actual[:, k], lw=0.8, label="actual")
+        ax.set_ylabel(f"v {AXES[k]} [mm/s]")
+    axes[-1].set_xlabel("time [s]")
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[0].set_title("tip velocity in B")
+    fig.tight_layout()
+    return {"velocity.png": _png(fig)}
+
+
+def _static_noise(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    est = scenario.component_of_kind("estimator")
+    raw, filt = _get(rec, est, "F_hand_meas_B"), _get(rec, est, "F_hand_B")
+    if raw is None or filt is None:
+        return {}
+    plt = _pyplot()
+    ready = rec[f"{est.name}.ready"][:, 0] > 0.5
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
+    raw_max = report.metrics.get("noise_max_abs_raw_N") or [math.nan] * 3
+    filt_max = report.metrics.get("noise_max_abs_filtered_N") or [math.nan] * 3
+    for k, ax in enumerate(axes):
+        ax.plot(rec.time[ready], raw[ready, k], lw=0.6, label=f"raw, max {raw_max[k]:.2f} N")
+        ax.plot(rec.time[ready], filt[ready, k], lw=0.9, label=f"filtered, max {filt_max[k]:.2f} N")
+        ax.set_ylabel(f"F_hand {AXES[k]} [N]")
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    axes[0].set_title("hand force estimate with nobody touching (seed Fig. 18)")
+    fig.tight_layout()
+    return {"noise.png": _png(fig)}
+
+
+def _gravity_calibration(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    from hoh_cosim.control.gravity import GravityModel
+
+    cal = report.data.get("calibration")
+    if cal is None:
+        return {}
+    R_BS, wrench = report.data["poses"]
+    model = GravityModel(cal.tool, scenario.component_of_kind("plant").params.g_B)
+    before = wrench - cal.bias
+    after = before - np.array([model.weight_S(R) for R in R_BS])
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, 3, sharex=True, figsize=(11, 6))
+    labels = ("F_x [N]", "F_y [N]", "F_z [N]", "τ_x [N·m]", "τ_y [N·m]", "τ_z [N·m]")
+    pose = np.arange(1, len(R_BS) + 1)
+    for k, ax in enumerate(axes.reshape(-1)):
+        ax.bar(pose - 0.2, before[:, k], 0.4, label="bias removed")
+        ax.bar(pose + 0.2, after[:, k], 0.4, label="weight removed too")
+        ax.set_ylabel(labels[k])
+    for ax in axes[-1]:
+        ax.set_xlabel("pose")
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle(
+        f"gravity compensation per pose (seed Fig. 16): m = {cal.mass_kg:.4f} kg, "
+        f"p_SC = {np.round(1e3 * cal.com_m, 2).tolist()} mm"
+    )
+    fig.tight_layout()
+    return {"gravity_residuals.png": _png(fig)}
+
+
+def _contact_scan(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    op = scenario.component_of_kind("operator")
+    plant = scenario.component_of_kind("plant")
+    contact, depth = _get(rec, plant, "F_contact_B"), _get(rec, plant, "penetration")
+    hand = _get(rec, op, "F_hand_B")
+    if contact is None or depth is None or hand is None:
+        return {}
+    d = op.params.press_direction_B
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
+    axes[0].plot(rec.time, -contact @ d, lw=1, label="phantom on the probe")
+    axes[0].plot(rec.time, hand @ d, lw=1, label="hand, along the press")
+    axes[0].axhline(op.params.target_force_N, color="k", ls="--", lw=0.8, label="target")
+    axes[0].set_ylabel("force [N]")
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[0].set_title(
+        f"contact: mean {_fmt(report.metrics.get('contact_force_mean_N'), 1, 'N')}, "
+        f"std {_fmt(report.metrics.get('contact_force_std_N'), 1, 'N')}, "
+        f"{report.metrics.get('contact_losses')} losses"
+    )
+    axes[1].plot(rec.time, 1e3 * depth[:, 0], lw=1)
+    axes[1].axhline(0.0, color="k", lw=0.5)
+    axes[1].set_ylabel("penetration [mm]")
+    axes[1].set_xlabel("time [s]")
+    fig.tight_layout()
+    return {"contact.png": _png(fig), **_command(scenario, rec)}
+
+
+def _release(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    op = scenario.component_of_kind("operator")
+    plant = scenario.component_of_kind("plant")
+    p, v, hand = _get(rec, plant, "p_BT_B"), _get(rec, plant, "twist_B"), _get(rec, op, "F_hand_B")
+    if p is None or v is None or hand is None:
+        return {}
+    plt = _pyplot()
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
+    axes[0].plot(rec.time, hand, lw=1)
+    axes[0].set_ylabel("hand force [N]")
+    axes[0].legend(["x", "y", "z"], fontsize=8, loc="upper right")
+    axes[1].plot(rec.time, 1e3 * np.linalg.norm(v[:, :3], axis=1), lw=1)
+    axes[1].set_ylabel("tip speed [mm/s]")
+    axes[2].plot(rec.time, 1e3 * (p - p[0]), lw=1)
+    axes[2].set_ylabel("tip displacement [mm]")
+    axes[2].set_xlabel("time [s]")
+    axes[0].set_title(
+        f"release: drift {_fmt(report.metrics.get('release_drift_m'), 1e3, 'mm')}, "
+        f"settles in {_fmt(report.metrics.get('release_settle_s'), 1, 's')}"
+    )
+    fig.tight_layout()
+    return {"release.png": _png(fig)}
+
+
+def _fmt(value: float | None, scale: float, unit: str) -> str:
+    return "n/a" if value is None else f"{scale * value:.3g} {unit}"
+
+
+_PLOTS: dict[str, Callable[[Scenario, Recording, Report], dict[str, bytes]]] = {
+    "circles": _circles,
+    "static_noise": _static_noise,
+    "gravity_calibration": _gravity_calibration,
+    "contact_scan": _contact_scan,
+    "release": _release,
+}
+
+
+def render_plots(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    """PNG file name -> contents, for the scenario's metric set (none for 'none')."""
+    render = _PLOTS.get(scenario.metrics)
+    return render(scenario, rec, report) if render is not None else {}

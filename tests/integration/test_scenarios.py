@@ -1,0 +1,196 @@
+"""Every scenario runs, through FMUs and in-process, to the same numbers and the promised results."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hoh_cosim.calibration import read_calibration
+from hoh_cosim.cli import main
+from hoh_cosim.control.limits import Status
+from hoh_cosim.cosim.engines import simulate
+from hoh_cosim.cosim.scenario import load_scenario
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+
+# (scenario, shortening options): long enough for every metric of the set to be measurable
+SHORT = {
+    "circles": ["--duration", "9"],
+    "static_noise": ["--duration", "5"],
+    "gravity_calibration": [
+        "--duration",
+        "28",
+        "--set",
+        "sequencer.tilts=2",
+        "--set",
+        "sequencer.tilt_min_deg=20",
+        "--set",
+        "sequencer.tilt_max_deg=45",
+        "--set",
+        "sequencer.directions=5",
+        "--set",
+        "sequencer.move_s=2.0",
+        "--set",
+        "sequencer.settle_s=0.3",
+        "--set",
+        "sequencer.hold_s=0.5",
+    ],
+    "contact_scan": ["--duration", "10"],
+    "contact_scan_fixture": ["--duration", "10"],
+    "release": ["--duration", "7"],
+}
+
+METRICS = {
+    "circles": {
+        "path_rms_error_m": float,
+        "hand_force_rms_N": float,
+        "filter_lag_ms": float,
+        "estimate_rms_error_N": float,
+    },
+    "static_noise": {
+        "noise_max_abs_raw_N": list,
+        "noise_max_abs_filtered_N": list,
+        "noise_attenuation": list,
+    },
+    "gravity_calibration": {
+        "mass_kg": float,
+        "com_m": list,
+        "mass_error_pct": float,
+        "com_error_mm": float,
+        "residual_rms_before_N": list,
+        "residual_rms_after_N": list,
+    },
+    "contact_scan": {
+        "contact_losses": int,
+        "contact_force_mean_N": float,
+        "contact_force_std_N": float,
+        "max_bounce_m": float,
+    },
+    "release": {"release_drift_m": float, "release_settle_s": float},
+}
+
+
+def test_every_scenario_file_has_a_short_form_here():
+    assert {p.stem for p in SCENARIOS.glob("*.yaml")} == set(SHORT)
+
+
+@pytest.mark.parametrize("engine", ["inprocess", "fmu"])
+@pytest.mark.parametrize("name", sorted(SHORT))
+def test_scenario_runs_and_writes_its_results(name, engine, tmp_path, capsys):
+    out = tmp_path / name
+    status = main(
+        [str(SCENARIOS / f"{name}.yaml"), "--engine", engine, "--out", str(out), *SHORT[name]]
+    )
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    assert "note:" not in captured.err  # every metric was measurable
+    summary = json.loads((out / "summary.json").read_text())
+    scenario = load_scenario(SCENARIOS / f"{name}.yaml")
+    assert summary["scenario"] == scenario.name
+    assert summary["engine"] == engine
+    assert summary["seed"] == scenario.seed
+    metrics = summary["metrics"]
+    for key, kind in METRICS[scenario.metrics].items():
+        assert isinstance(metrics[key], kind), (key, metrics[key])
+        if kind is list:
+            assert len(metrics[key]) == 3
+            assert all(np.isfinite(metrics[key]))
+    assert metrics["realtime_factor"] > 0
+    assert metrics["wall_s"] > 0
+    header = (out / "signals.csv").read_text().split("\n", 1)[0].split(",")
+    assert header[0] == "time"
+    for signal in scenario.record:
+        assert any(column.startswith(signal) for column in header), signal
+    assert list(out.glob("*.png")), "no plots"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging left
+
+
+def test_the_two_engines_give_the_same_signals():
+    scenario = load_scenario(SCENARIOS / "circles.yaml", duration_s=6.0)
+    fmu = simulate(scenario, "fmu", progress=False)
+    inprocess = simulate(scenario, "inprocess", progress=False)
+    assert fmu.columns == inprocess.columns
+    assert np.max(np.abs(fmu.values - inprocess.values)) <= 1e-9
+    # and the run did something: the hand moved the probe
+    assert np.ptp(fmu["plant.p_BT_B"][:, 0]) > 0.01
+
+
+def test_same_seed_same_numbers_other_seed_other_noise():
+    def run(seed):
+        scenario = load_scenario(SCENARIOS / "static_noise.yaml", duration_s=3.0, seed=seed)
+        return simulate(scenario, "inprocess", progress=False)["estimator.F_hand_meas_B"]
+
+    first, again, other = run(4), run(4), run(5)
+    np.testing.assert_array_equal(first, again)
+    assert np.max(np.abs(first - other)) > 0.1
+
+
+def test_scheduled_events_release_drop_out_jump_and_retune(tmp_path):
+    scenario_file = tmp_path / "events.yaml"
+    scenario_file.write_text(
+        f"""
+extends: {SCENARIOS / "circles.yaml"}
+name: events
+duration_s: 9.0
+events:
+  - {{at_s: 5.0, set: {{ft150.connected: false}}}}
+  - {{at_s: 5.3, set: {{ft150.connected: true}}}}
+  - {{at_s: 6.0, set: {{ft150.offset: [4.0, -2.4, 3.1, 0.041, -0.027, 0.013]}}}}
+  - {{at_s: 7.0, set: {{operator.released: true, controller.translation.slope: [0.0, 0.0, 0.0]}}}}
+"""
+    )
+    scenario = load_scenario(scenario_file)
+    for engine in ("inprocess", "fmu"):
+        rec = simulate(scenario, engine, progress=False)
+        t = rec.time
+        counter = rec["ft150.counter"][:, 0]
+        # the dropout: no packet from 5.0 s to 5.3 s (the last in flight arrives 2 ms late)
+        window = (t > 5.01) & (t < 5.3)
+        assert np.ptp(counter[window]) == 0
+        assert counter[t > 5.4][0] > counter[window][0]
+        # the controller saw the stale sensor and stopped
+        status = rec["controller.status"][:, 0].astype(int)
+        assert any(Status(s) & Status.STALE_FT for s in status[(t > 5.0) & (t < 5.4)])
+        # the bias jump: the sensor's error on its x axis grows by 2.2 N
+        error = rec["ft150.wrench_S"][:, 0] - rec["plant.wrench_S"][:, 0]
+        jump = np.mean(error[(t > 6.1) & (t < 7.0)]) - np.mean(error[(t > 5.5) & (t < 6.0)])
+        assert jump == pytest.approx(2.2, abs=0.1)
+        # the release and the zero gains: the hand is off, the robot stands
+        assert np.all(rec["operator.hand_on"][t > 7.01, 0] == 0.0)
+        assert np.all(rec["controller.twist_B"][t > 7.1, :3] == 0.0)
+
+
+def test_identify_gravity_on_the_written_poses_gives_the_written_calibration(tmp_path, capsys):
+    out = tmp_path / "cal"
+    status = main(
+        [
+            str(SCENARIOS / "gravity_calibration.yaml"),
+            *("--engine", "inprocess", "--out", str(out)),
+            *SHORT["gravity_calibration"],
+        ]
+    )
+    assert status == 0, capsys.readouterr().err
+    written = read_calibration(out / "calibration.json")
+    assert (
+        main(["identify-gravity", str(out / "poses.csv"), "--out", str(tmp_path / "again.json")])
+        == 0
+    )
+    again = read_calibration(tmp_path / "again.json")
+    assert again.mass_kg == pytest.approx(written.mass_kg, rel=1e-9)
+    np.testing.assert_allclose(again.com_m, written.com_m, atol=1e-9)
+    # and the simulated tool is found: 0.48 kg
+    assert written.mass_kg == pytest.approx(0.48, rel=0.02)
+
+
+def test_a_rerun_replaces_the_earlier_results_whole(tmp_path, capsys):
+    out = tmp_path / "run"
+    args = [str(SCENARIOS / "release.yaml"), "--engine", "inprocess", "--out", str(out)]
+    assert main([*args, "--duration", "7"]) == 0
+    (out / "stale.txt").write_text("from before")
+    assert main([*args, "--duration", "7.5"]) == 0
+    assert not (out / "stale.txt").exists()
+    assert json.loads((out / "summary.json").read_text())["duration_s"] == 7.5
+    capsys.readouterr()
