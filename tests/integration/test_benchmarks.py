@@ -21,3 +21,22 @@ def test_controller_cycle_prints_its_percentiles_as_json():
     figures = json.loads(result.stdout.strip().splitlines()[-1])
     assert figures["cycles"] == 2000
     assert 0 < figures["p50_us"] <= figures["p99_us"] <= figures["p99_9_us"] <= figures["max_us"]
+
+
+def test_cosim_speed_prints_its_figures_as_json():
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(BENCHMARKS / "cosim_speed.py"),
+            *("--duration", "1", "--steps", "300", "--repeats", "1"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert figures["steps"] == 300
+    assert figures["trivial_fmus"] == 4
+    for key in ("fmu_realtime_factor", "inprocess_realtime_factor", "master_us_per_step"):
+        assert figures[key] > 0
