@@ -39,12 +39,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from hoh_cosim.control.block import Port
 from hoh_cosim.cosim.components import KINDS, ComponentKind
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import from_mapping, leaves, override
+from hoh_cosim.yamlfile import Where, parse_value, read_yaml
 
 __all__ = [
     "METRIC_SETS",
@@ -150,44 +150,6 @@ class Scenario:
         return next((c for c in self.components.values() if c.kind.name == kind), None)
 
 
-class _Where:
-    """The file and YAML path of a value, for one-line errors."""
-
-    def __init__(self, path: Path) -> None:
-        self.file = str(path)
-
-    def error(self, where: str, problem: str) -> ConfigError:
-        return ConfigError(
-            f"{self.file}: {where}: {problem}" if where else f"{self.file}: {problem}"
-        )
-
-
-def _number(value: Any, where: str, w: _Where, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-        raise w.error(where, f"expected a number, got {value!r}")
-    if positive and value <= 0:
-        raise w.error(where, f"expected a number > 0, got {value!r}")
-    return float(value)
-
-
-def _integer(value: Any, where: str, w: _Where, *, low: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise w.error(where, f"expected an integer >= {low}, got {value!r}")
-    return value
-
-
-def _known_keys(mapping: Any, keys: Sequence[str], where: str, w: _Where) -> Mapping[str, Any]:
-    if not isinstance(mapping, Mapping):
-        raise w.error(where, f"expected a mapping, got {mapping!r}")
-    for key in mapping:
-        if key not in keys:
-            raise w.error(
-                f"{where}.{key}" if where else str(key),
-                f"unknown key (expected one of: {', '.join(keys)})",
-            )
-    return mapping
-
-
 def component_seed(scenario_seed: int, name: str) -> int:
     """A component's seed: independent per component, fixed by the scenario's seed and its name."""
     state = np.random.SeedSequence([scenario_seed, zlib.crc32(name.encode())])
@@ -195,7 +157,7 @@ def component_seed(scenario_seed: int, name: str) -> int:
 
 
 def parse_endpoint(
-    text: Any, components: Mapping[str, ComponentSpec], direction: str, where: str, w: _Where
+    text: Any, components: Mapping[str, ComponentSpec], direction: str, where: str, w: Where
 ) -> tuple[str, Port, tuple[int, ...]]:
     """`component.port` or `component.port[i]` -> (component, port, 0-based elements)."""
     if not isinstance(text, str) or (match := _ENDPOINT.match(text.strip())) is None:
@@ -221,9 +183,9 @@ def parse_endpoint(
     return name, port, (i - 1,)
 
 
-def _component(name: str, raw: Any, seed: int, w: _Where) -> ComponentSpec:
+def _component(name: str, raw: Any, seed: int, w: Where) -> ComponentSpec:
     where = f"components.{name}"
-    raw = _known_keys(raw if raw is not None else {}, _COMPONENT_KEYS, where, w)
+    raw = w.mapping(raw if raw is not None else {}, _COMPONENT_KEYS, where)
     kind_name = raw.get("kind", name)
     if not isinstance(kind_name, str) or kind_name not in KINDS:
         raise w.error(
@@ -231,7 +193,7 @@ def _component(name: str, raw: Any, seed: int, w: _Where) -> ComponentSpec:
             f"unknown component kind {kind_name!r} (kinds: {', '.join(KINDS)})",
         )
     kind = KINDS[kind_name]
-    every = _integer(raw.get("every", 1), f"{where}.every", w, low=1)
+    every = w.integer(raw.get("every", 1), f"{where}.every", low=1)
     try:
         params = from_mapping(kind.params(), raw.get("params") or {}, f"{where}.params")
     except ConfigError as exc:
@@ -244,21 +206,6 @@ def _component(name: str, raw: Any, seed: int, w: _Where) -> ComponentSpec:
         if not fmu.is_file():
             raise w.error(f"{where}.fmu", f"no such FMU '{raw['fmu']}' (looked for {fmu})")
     return ComponentSpec(name, kind, every, params, component_seed(seed, name), fmu)
-
-
-def _read_yaml(path: Path) -> Any:
-    w = _Where(path)
-    try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise w.error(where, f"not valid YAML: {problem}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read: {exc}") from None
 
 
 def _merge(base: Any, change: Any) -> Any:
@@ -274,10 +221,10 @@ def _merge(base: Any, change: Any) -> Any:
 def _read_raw(path: Path, seen: tuple[Path, ...]) -> Any:
     """The file's YAML with its `extends:` chain resolved (the base checked on its own first, so a
     mistake in the base is reported against the base)."""
-    raw = _read_yaml(path)
+    raw = read_yaml(path)
     if not isinstance(raw, Mapping) or "extends" not in raw:
         return raw
-    w = _Where(path)
+    w = Where(path)
     base_name = raw["extends"]
     if not isinstance(base_name, str) or not base_name:
         raise w.error("extends", f"expected the path of a scenario file, got {base_name!r}")
@@ -299,33 +246,33 @@ def load_scenario(
 ) -> Scenario:
     """Read and check a scenario; `overrides` are `component.path=value` strings (`--set`)."""
     path = Path(path)
-    w = _Where(path)
+    w = Where(path)
     raw = _read_raw(path, ())
-    raw = _known_keys(raw, _TOP_KEYS, "", w)
+    raw = w.mapping(raw, _TOP_KEYS, "")
     for key in ("name", "duration_s", "components"):
         if key not in raw:
             raise w.error(key, "missing")
     name = raw["name"]
     if not isinstance(name, str) or not name:
         raise w.error("name", f"expected a non-empty string, got {name!r}")
-    duration = _number(raw["duration_s"], "duration_s", w, positive=True)
+    duration = w.number(raw["duration_s"], "duration_s", positive=True)
     if duration_s is not None:
-        duration = _number(duration_s, "--duration", w, positive=True)
-    dt = _number(raw.get("dt_s", 0.001), "dt_s", w, positive=True)
+        duration = w.number(duration_s, "--duration", positive=True)
+    dt = w.number(raw.get("dt_s", 0.001), "dt_s", positive=True)
     if dt > duration:
         raise w.error(
             "dt_s" if duration_s is None else "--duration",
             f"the run is shorter than one tick: duration {duration} s, tick {dt} s",
         )
-    scenario_seed = _integer(raw.get("seed", 0), "seed", w)
+    scenario_seed = w.integer(raw.get("seed", 0), "seed")
     if seed is not None:
-        scenario_seed = _integer(seed, "--seed", w)
+        scenario_seed = w.integer(seed, "--seed")
     metrics = raw.get("metrics", "none")
     if not isinstance(metrics, str) or metrics not in METRIC_SETS:
         raise w.error("metrics", f"expected one of {', '.join(METRIC_SETS)}, got {metrics!r}")
-    record_every = _integer(raw.get("record_every", 1), "record_every", w, low=1)
+    record_every = w.integer(raw.get("record_every", 1), "record_every", low=1)
 
-    raw_components = _known_keys(raw["components"], list(raw["components"] or {}), "components", w)
+    raw_components = w.mapping(raw["components"], list(raw["components"] or {}), "components")
     if not raw_components:
         raise w.error("components", "expected at least one component")
     components = {n: _component(n, c, scenario_seed, w) for n, c in raw_components.items()}
@@ -347,11 +294,7 @@ def load_scenario(
             raise ConfigError(
                 f"{where}: unknown component {component!r} (components: {', '.join(components)})"
             )
-        try:
-            value = yaml.safe_load(value_text)
-        except yaml.YAMLError as exc:
-            problem = getattr(exc, "problem", None) or "not valid YAML"
-            raise ConfigError(f"{where}: cannot read the value {value_text!r}: {problem}") from None
+        value = parse_value(text, value_text)
         spec = components[component]
         new = override(spec.params, param_path, value, f"--set {component}")
         components[component] = dataclasses.replace(spec, params=new)
@@ -401,7 +344,7 @@ def load_scenario(
 
 
 def _connections(
-    raw: Any, components: dict[str, ComponentSpec], w: _Where
+    raw: Any, components: dict[str, ComponentSpec], w: Where
 ) -> tuple[list[Connection], dict[tuple[str, str, int], int]]:
     """The connections, and for every input element fed which connection feeds it."""
     if not isinstance(raw, list):
@@ -410,7 +353,7 @@ def _connections(
     fed: dict[tuple[str, str, int], int] = {}
     for i, item in enumerate(raw):
         where = f"connections[{i}]"
-        item = _known_keys(item, ("from", "to"), where, w)
+        item = w.mapping(item, ("from", "to"), where)
         for key in ("from", "to"):
             if key not in item:
                 raise w.error(f"{where}.{key}", "missing")
@@ -434,9 +377,9 @@ def _connections(
 
 
 def _input_defaults(
-    raw: Any, components: dict[str, ComponentSpec], w: _Where
+    raw: Any, components: dict[str, ComponentSpec], w: Where
 ) -> dict[tuple[str, str], np.ndarray]:
-    raw = _known_keys(raw, list(raw) if isinstance(raw, Mapping) else [], "inputs", w)
+    raw = w.mapping(raw, list(raw) if isinstance(raw, Mapping) else [], "inputs")
     out: dict[tuple[str, str], np.ndarray] = {}
     for key, value in raw.items():
         where = f"inputs.{key}"
@@ -446,12 +389,12 @@ def _input_defaults(
         values = value if isinstance(value, list) else [value]
         if len(values) != port.size:
             raise w.error(where, f"expected {port.size} values, got {len(values)}")
-        out[(name, port.name)] = np.array([_number(v, where, w) for v in values])
+        out[(name, port.name)] = np.array([w.number(v, where) for v in values])
     return out
 
 
 def _events(
-    raw: Any, components: dict[str, ComponentSpec], duration: float, w: _Where
+    raw: Any, components: dict[str, ComponentSpec], duration: float, w: Where
 ) -> list[Event]:
     if not isinstance(raw, list):
         raise w.error("events", f"expected a list, got {raw!r}")
@@ -460,17 +403,16 @@ def _events(
     checked: list[tuple[float, int, Mapping[str, Any]]] = []
     for i, item in enumerate(raw):
         where = f"events[{i}]"
-        item = _known_keys(item, ("at_s", "set"), where, w)
+        item = w.mapping(item, ("at_s", "set"), where)
         if "at_s" not in item or "set" not in item:
             raise w.error(where, "expected at_s and set")
-        at = _number(item["at_s"], f"{where}.at_s", w)
+        at = w.number(item["at_s"], f"{where}.at_s")
         if not 0.0 <= at <= duration:
             raise w.error(f"{where}.at_s", f"expected a time within 0 to {duration} s, got {at}")
-        changes = _known_keys(
+        changes = w.mapping(
             item["set"],
             list(item["set"]) if isinstance(item["set"], Mapping) else [],
             f"{where}.set",
-            w,
         )
         checked.append((at, i, changes))
     for at, i, changes in sorted(checked, key=lambda c: (c[0], c[1])):  # in time, then file order
@@ -509,7 +451,7 @@ def _events(
     return out
 
 
-def _record(raw: Any, components: dict[str, ComponentSpec], w: _Where) -> list[str]:
+def _record(raw: Any, components: dict[str, ComponentSpec], w: Where) -> list[str]:
     every = [f"{c.name}.{p.name}" for c in components.values() for p in c.outputs]
     if raw is None:
         return every
