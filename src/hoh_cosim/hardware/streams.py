@@ -1,0 +1,194 @@
+"""What the sensor drivers share: samples, the latest-sample mailbox, statistics, reader threads.
+
+A driver is a pure parser (bytes in, samples out, never blocking, never raising on bad bytes) plus a
+thin transport (a socket or a serial port) read by a thread of its own. The thread publishes every
+sample into a `Mailbox`; the control loop takes the latest sample and a counter that grows with every
+sample, so it never waits for I/O and the estimator can tell a new packet from an old one (its
+`ft_counter` / `probe_counter` inputs).
+
+Time stamps are `time.monotonic()` at receipt: the FT-150 stream carries none, and the FSE103's own
+millisecond counter is kept beside it (`device_ms`) but never mixed with host time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hoh_cosim.control.vectors import Vec
+
+__all__ = ["Mailbox", "ReaderThread", "Sample", "StreamStats", "now"]
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One reading: `values` in SI units (N, N·m), received at `received_s` (monotonic clock)."""
+
+    values: Vec
+    received_s: float
+    device_ms: int | None = None  # the device's own time stamp, where it sends one
+
+
+@dataclass
+class StreamStats:
+    """Counts and timing of one stream, for diagnostics and the end-of-session report."""
+
+    frames: int = 0
+    bad_frames: int = 0
+    nonfinite: int = 0  # samples with a NaN or an infinity (kept out of mean and std)
+    bytes: int = 0
+    losses: int = 0  # failures: connections lost, devices gone, attempts refused
+    reconnects: int = 0  # successful connections after the first
+    first_s: float = math.nan
+    last_s: float = math.nan
+    sums: Vec = field(default_factory=lambda: np.zeros(0))
+    sums_sq: Vec = field(default_factory=lambda: np.zeros(0))
+
+    def add(self, sample: Sample) -> None:
+        if self.frames == 0:
+            self.first_s = sample.received_s
+            self.sums = np.zeros_like(sample.values)
+            self.sums_sq = np.zeros_like(sample.values)
+        self.frames += 1
+        self.last_s = sample.received_s
+        if np.all(np.isfinite(sample.values)):
+            self.sums += sample.values
+            self.sums_sq += sample.values * sample.values
+        else:
+            self.nonfinite += 1
+
+    @property
+    def rate_hz(self) -> float:
+        """Samples per second between the first and the last (NaN with fewer than two)."""
+        if self.frames < 2 or self.last_s <= self.first_s:
+            return math.nan
+        return (self.frames - 1) / (self.last_s - self.first_s)
+
+    @property
+    def mean(self) -> Vec:
+        """Mean of the finite samples."""
+        n = self.frames - self.nonfinite
+        return self.sums / n if n else np.full_like(self.sums, math.nan)
+
+    @property
+    def std(self) -> Vec:
+        """Sample standard deviation of the finite samples."""
+        n = self.frames - self.nonfinite
+        if n < 2:
+            return np.full_like(self.sums, math.nan)
+        mean = self.sums / n
+        variance = (self.sums_sq - n * mean * mean) / (n - 1)
+        return np.sqrt(np.maximum(variance, 0.0))
+
+
+class Mailbox:
+    """The latest sample of one stream and how many have arrived; safe across threads."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._latest: Sample | None = None
+        self._count = 0
+        self.stats = StreamStats()
+        self.error: str | None = None  # why the stream is down, while it is
+        self.last_error: str | None = None  # the latest reason it went down, kept after recovery
+
+    def publish(self, sample: Sample) -> None:
+        with self._lock:
+            self._latest = sample
+            self._count += 1
+            self.stats.add(sample)
+
+    def latest(self) -> tuple[Sample | None, int]:
+        """(the newest sample or None, how many samples have arrived so far)."""
+        with self._lock:
+            return self._latest, self._count
+
+    def count_bad(self, n: int) -> None:
+        if n:
+            with self._lock:
+                self.stats.bad_frames += n
+
+    def set_error(self, error: str | None) -> None:
+        with self._lock:
+            self.error = error
+            if error is not None:
+                self.last_error = error
+                self.stats.losses += 1
+
+
+class ReaderThread(threading.Thread):
+    """Reads a transport until stopped: `connect()` opens it, `read()` returns bytes (b"" when the
+    other side closed, None when nothing came within its timeout), `handle(data)` parses and
+    publishes. On a failure it records the reason in
+    the mailbox, closes, waits `retry_s` and connects again (`reconnect=False`: it gives up)."""
+
+    def __init__(
+        self,
+        name: str,
+        mailbox: Mailbox,
+        connect: Callable[[], None],
+        read: Callable[[], bytes | None],
+        handle: Callable[[bytes], None],
+        close: Callable[[], None],
+        *,
+        reconnect: bool = True,
+        retry_s: float = 0.5,
+    ) -> None:
+        super().__init__(name=name, daemon=True)
+        self.mailbox = mailbox
+        self._connect, self._read, self._handle, self._close = connect, read, handle, close
+        self.reconnect = reconnect
+        self.retry_s = retry_s
+        self._halt = threading.Event()
+        self.connected = threading.Event()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._halt.set()
+        self._close_quietly()
+        if self.is_alive() and threading.current_thread() is not self:
+            self.join(timeout)
+
+    def _close_quietly(self) -> None:
+        with contextlib.suppress(OSError):
+            self._close()
+
+    def run(self) -> None:
+        connected_before = False
+        while not self._halt.is_set():
+            try:
+                self._connect()
+                if connected_before:
+                    self.mailbox.stats.reconnects += 1
+                connected_before = True
+                self.connected.set()
+                self.mailbox.set_error(None)
+                while not self._halt.is_set():
+                    data = self._read()
+                    if data is None:  # nothing yet (a read timeout): look at the stop flag again
+                        continue
+                    if not data:
+                        raise ConnectionError("the device closed the connection")
+                    self.mailbox.stats.bytes += len(data)
+                    self._handle(data)
+            except Exception as exc:  # a reader must never die silently: say why, then retry
+                if self._halt.is_set():
+                    break
+                self.connected.clear()
+                self.mailbox.set_error(f"{type(exc).__name__}: {exc}".rstrip(": "))
+                self._close_quietly()
+                if not self.reconnect:
+                    break
+                self._halt.wait(self.retry_s)
+        self.connected.clear()
+        self._close_quietly()
+
+
+def now() -> float:
+    """The receipt clock."""
+    return time.monotonic()
