@@ -1,0 +1,244 @@
+"""A rig's configuration: one YAML file, checked like a scenario (same one-line errors).
+
+    robot:
+      host: 192.168.1.10
+      frequency_hz: -1            # the controller's own rate: 125 Hz on a CB3, 500 Hz on an e-series
+      watchdog_hz: 20             # ur-rtde's watchdog: the robot stops if we fall silent for 50 ms
+      acceleration: 1.0           # speedL's a [m/s²], above the controller's own 1 m/s² clamp
+      sensor_rotvec_T: [3.141592653589793, 0, 0]   # the wrist sensor S in the TCP frame (R_TS)
+      realtime_priority: 80       # optional: SCHED_FIFO for the loop (Linux, needs the right)
+    ft150:
+      host: 192.168.1.10          # default: the robot's
+      port: 63351
+      zero_on_start: false        # also send SET ZRO to port 63350 before the rebias
+    probe:                        # or `probe: null` without a probe sensor
+      device: /dev/ttyACM0
+      framing: auto               # seed18, guide20 or auto
+      byte_order: auto            # little, big or auto
+    calibration: calibration.json # from `hoh-cosim hw calibrate` (path from this file)
+    rebias:
+      samples: 500                # averaged while the robot holds still (seed 3.B.1)
+      max_speed_m_s: 0.002
+      tolerance_N: 2.0            # mean minus (weight + calibrated offset) must stay within these
+      tolerance_Nm: 0.2
+      timeout_s: 15.0
+    estimator: {...}              # EstimatorParams overrides (the tool comes from the calibration)
+    controller: {...}             # ControllerParams overrides (gains, limits, fixture, ...)
+    log_dir: sessions             # session logs (MCAP), path from this file
+    stale_stop_s: 0.25            # a stream silent this long ends the session; a shorter gap
+                                  # (over 3 packet periods) only makes the command zero
+
+Only `robot.host` is required.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hoh_cosim.control.controller import ControllerParams
+from hoh_cosim.control.estimator import EstimatorParams
+from hoh_cosim.control.frames import rotvec_to_matrix
+from hoh_cosim.control.vectors import Rot3
+from hoh_cosim.errors import ConfigError
+from hoh_cosim.params import from_mapping, override
+from hoh_cosim.yamlfile import Where, parse_value, read_yaml
+
+__all__ = [
+    "FT150Config",
+    "HardwareConfig",
+    "ProbeConfig",
+    "RebiasConfig",
+    "RobotConfig",
+    "load_config",
+]
+
+_R_TS_DEFAULT = (np.pi, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    host: str
+    frequency_hz: float = -1.0
+    watchdog_hz: float = 20.0
+    acceleration: float = 1.0
+    R_TS: Rot3 = dataclasses.field(default_factory=lambda: rotvec_to_matrix(_R_TS_DEFAULT))
+    realtime_priority: int | None = None  # SCHED_FIFO for the loop (Linux; needs the right)
+
+
+@dataclass(frozen=True)
+class FT150Config:
+    host: str
+    port: int = 63351
+    zero_on_start: bool = False
+
+
+@dataclass(frozen=True)
+class ProbeConfig:
+    device: str
+    framing: str = "auto"
+    byte_order: str = "auto"
+    baudrate: int = 115200
+
+
+@dataclass(frozen=True)
+class RebiasConfig:
+    samples: int = 500
+    max_speed_m_s: float = 0.002
+    tolerance_N: float = 2.0
+    tolerance_Nm: float = 0.2
+    timeout_s: float = 15.0
+
+
+@dataclass(frozen=True)
+class HardwareConfig:
+    path: Path
+    robot: RobotConfig
+    ft150: FT150Config
+    probe: ProbeConfig | None
+    calibration: Path | None
+    rebias: RebiasConfig
+    estimator: EstimatorParams
+    controller: ControllerParams
+    log_dir: Path
+    stale_stop_s: float = 0.25  # a stream silent this long ends the session (shorter: zero twist)
+
+
+_TOP = (
+    "robot",
+    "ft150",
+    "probe",
+    "calibration",
+    "rebias",
+    "estimator",
+    "controller",
+    "log_dir",
+    "stale_stop_s",
+)
+
+
+def _section(w: Where, raw: Any, name: str, keys: tuple[str, ...]) -> dict[str, Any]:
+    value = raw.get(name)
+    return dict(w.mapping({} if value is None else value, keys, name))
+
+
+def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConfig:
+    """Read and check a rig's configuration; `overrides` are `estimator.x=v` / `controller.x=v`
+    strings (`--set`)."""
+    path = Path(path)
+    w = Where(path)
+    raw = w.mapping(read_yaml(path) or {}, _TOP, "")
+    here = path.parent
+
+    robot = _section(
+        w, raw, "robot", (
+            "host",
+            "frequency_hz",
+            "watchdog_hz",
+            "acceleration",
+            "sensor_rotvec_T",
+            "realtime_priority",
+        ),
+    )
+    if "host" not in robot:
+        raise w.error("robot.host", "missing (the robot's address)")
+    rotvec = robot.get("sensor_rotvec_T", list(_R_TS_DEFAULT))
+    if not isinstance(rotvec, list) or len(rotvec) != 3:
+        raise w.error("robot.sensor_rotvec_T", f"expected a list of 3 numbers, got {rotvec!r}")
+    frequency = w.number(robot.get("frequency_hz", -1.0), "robot.frequency_hz")
+    if frequency != -1.0 and not 1.0 <= frequency <= 1000.0:
+        raise w.error("robot.frequency_hz", f"expected -1 or 1 to 1000 Hz, got {frequency}")
+    robot_config = RobotConfig(
+        host=w.string(robot["host"], "robot.host"),
+        frequency_hz=frequency,
+        watchdog_hz=w.number(robot.get("watchdog_hz", 20.0), "robot.watchdog_hz", positive=True),
+        acceleration=w.number(robot.get("acceleration", 1.0), "robot.acceleration", positive=True),
+        R_TS=rotvec_to_matrix(
+            [w.number(x, f"robot.sensor_rotvec_T[{i + 1}]") for i, x in enumerate(rotvec)]
+        ),
+        realtime_priority=None
+        if robot.get("realtime_priority") is None
+        else w.integer(robot["realtime_priority"], "robot.realtime_priority", low=2, high=98),
+    )
+
+    ft = _section(w, raw, "ft150", ("host", "port", "zero_on_start"))
+    ft_config = FT150Config(
+        host=w.string(ft.get("host", robot_config.host), "ft150.host"),
+        port=w.integer(ft.get("port", 63351), "ft150.port", low=1, high=65535),
+        zero_on_start=w.boolean(ft.get("zero_on_start", False), "ft150.zero_on_start"),
+    )
+
+    probe_config = None
+    if "probe" not in raw or raw["probe"] is not None:
+        probe = _section(w, raw, "probe", ("device", "framing", "byte_order", "baudrate"))
+        if "device" not in probe:
+            raise w.error("probe.device", "missing (or write `probe: null` for no probe sensor)")
+        probe_config = ProbeConfig(
+            device=w.string(probe["device"], "probe.device"),
+            framing=w.string(
+                probe.get("framing", "auto"), "probe.framing", choices=("auto", "seed18", "guide20")
+            ),
+            byte_order=w.string(
+                probe.get("byte_order", "auto"),
+                "probe.byte_order",
+                choices=("auto", "little", "big"),
+            ),
+            baudrate=w.integer(probe.get("baudrate", 115200), "probe.baudrate", low=1),
+        )
+
+    calibration = None
+    if raw.get("calibration") is not None:
+        calibration = here / w.string(raw["calibration"], "calibration")
+
+    rebias = _section(
+        w, raw, "rebias", ("samples", "max_speed_m_s", "tolerance_N", "tolerance_Nm", "timeout_s")
+    )
+    rebias_config = RebiasConfig(
+        samples=w.integer(rebias.get("samples", 500), "rebias.samples", low=1),
+        max_speed_m_s=w.number(
+            rebias.get("max_speed_m_s", 0.002), "rebias.max_speed_m_s", positive=True
+        ),
+        tolerance_N=w.number(rebias.get("tolerance_N", 2.0), "rebias.tolerance_N", positive=True),
+        tolerance_Nm=w.number(
+            rebias.get("tolerance_Nm", 0.2), "rebias.tolerance_Nm", positive=True
+        ),
+        timeout_s=w.number(rebias.get("timeout_s", 15.0), "rebias.timeout_s", positive=True),
+    )
+
+    try:
+        estimator = from_mapping(EstimatorParams(), raw.get("estimator") or {}, "estimator")
+        controller = from_mapping(ControllerParams(), raw.get("controller") or {}, "controller")
+        if probe_config is None:  # no probe sensor: no compensation, fixture or contact limits
+            estimator = dataclasses.replace(estimator, use_probe=False)
+            controller = dataclasses.replace(controller, use_probe=False)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    log_dir = here / w.string(raw.get("log_dir", "sessions"), "log_dir")
+    params = {"estimator": estimator, "controller": controller}
+    for text in overrides:
+        target, sep, value_text = text.partition("=")
+        block, _, param_path = target.partition(".")
+        if not sep or not param_path or block not in params:
+            raise ConfigError(
+                f"--set {text}: expected estimator.parameter=value or controller.parameter=value"
+            )
+        params[block] = override(
+            params[block], param_path, parse_value(text, value_text), f"--set {block}"
+        )
+    return HardwareConfig(
+        path,
+        robot_config,
+        ft_config,
+        probe_config,
+        calibration,
+        rebias_config,
+        params["estimator"],
+        params["controller"],
+        log_dir,
+        w.number(raw.get("stale_stop_s", 0.25), "stale_stop_s", positive=True),
+    )

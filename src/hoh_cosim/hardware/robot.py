@@ -1,0 +1,231 @@
+"""The UR5 behind one small interface: read its state, command a speedL twist, stop it.
+
+`RtdeRobot` is the real one, through ur-rtde's RTDEReceiveInterface and RTDEControlInterface (seed
+000, section 2: the seed drove its UR5 over RTDE). The rehearsal's simulated robot
+(`plant_models.emulators.SimulatedRobot`) offers the same methods, so the runner cannot tell them
+apart.
+
+Safety (DESIGN.md §7, notes/hardware.md): the control interface uploads a URScript program that keeps
+executing the last speed command, so a process that hangs or dies would leave the robot moving.
+`connect()` enables ur-rtde's watchdog (the controller stops the program when no command arrives for
+`1/watchdog_hz` s), the runner kicks it every cycle, and `stop()` (speedStop, then stopScript) is
+called from a `finally`; it never raises, since it runs while something else has already gone wrong.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from hoh_cosim.control.frames import rotvec_to_matrix
+from hoh_cosim.control.vectors import Rot3, Vec, Vec3
+from hoh_cosim.errors import RunError
+
+__all__ = ["ROBOT_MODE_RUNNING", "SAFETY_MODE_NORMAL", "Pacer", "Robot", "RobotState", "RtdeRobot"]
+
+ROBOT_MODE_RUNNING = 7
+"""UR's robot mode when the arm is powered, brakes released and ready (RTDE `robot_mode`)."""
+SAFETY_MODE_NORMAL = 1
+"""UR's safety mode in normal operation (RTDE `safety_mode`); 2 is reduced, 3 protective stop."""
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """What the loop needs of the robot in one cycle."""
+
+    p_BT_B: Vec3  # TCP position [m]
+    R_BT: Rot3  # TCP orientation
+    twist_B: Vec  # actual TCP twist [v; ω] [m/s, rad/s]
+    robot_mode: int
+    safety_mode: int
+    protective_stop: bool
+    emergency_stop: bool
+    program_running: bool
+    timestamp_s: float  # the controller's own clock
+
+    def problem(self) -> str | None:
+        """Why the robot cannot be commanded now, or None."""
+        if self.emergency_stop:
+            return "the robot is emergency-stopped"
+        if self.protective_stop:
+            return "the robot is in a protective stop"
+        if not self.program_running:
+            return "the control program on the robot is not running"
+        if self.robot_mode != ROBOT_MODE_RUNNING:
+            return f"the robot is not running (robot mode {self.robot_mode})"
+        return None
+
+
+class Robot(Protocol):
+    """The interface the runner drives; `RtdeRobot` and the rehearsal's simulated robot offer it."""
+
+    period_s: float
+
+    def connect(self) -> None: ...
+    def pacer(self) -> Any: ...  # an object whose wait() starts each cycle, returning lateness
+    def state(self) -> RobotState: ...
+    def speed_l(self, twist_B: Vec, acceleration: float) -> None: ...
+    def kick_watchdog(self) -> None: ...
+    def stop(self) -> None: ...
+    def close(self) -> None: ...
+    def describe(self) -> str: ...
+
+
+class Pacer:
+    """An absolute schedule of cycle starts: sleep until shortly before each, then spin.
+
+    `wait()` returns the lateness of the cycle's start [s] (its jitter). A cycle that starts more
+    than a whole period late is an overrun: the schedule then restarts from now instead of running
+    the missed cycles back to back.
+    """
+
+    def __init__(self, period_s: float, spin_s: float = 3e-4) -> None:
+        self.period_s = period_s
+        self.spin_s = spin_s
+        self.next_s: float | None = None
+        self.overruns = 0
+
+    def wait(self) -> float:
+        now = time.perf_counter()
+        if self.next_s is None:
+            self.next_s = now
+            return 0.0
+        self.next_s += self.period_s
+        target = self.next_s
+        if target - now > self.spin_s:
+            time.sleep(target - now - self.spin_s)
+        while (now := time.perf_counter()) < target:
+            pass
+        late = now - target
+        if late > self.period_s:
+            self.overruns += 1
+            self.next_s = now
+        return late
+
+
+class _RtdePacer:
+    """Cycle starts from ur-rtde's own period helpers (`initPeriod` / `waitPeriod`), with the same
+    lateness figures as `Pacer` measured around them."""
+
+    def __init__(self, control: Any, period_s: float) -> None:
+        self.control = control
+        self.period_s = period_s
+        self.started: Any = None
+        self.next_s: float | None = None
+        self.overruns = 0
+
+    def wait(self) -> float:
+        if self.started is not None:
+            self.control.waitPeriod(self.started)
+        self.started = self.control.initPeriod()
+        now = time.perf_counter()
+        if self.next_s is None:
+            self.next_s = now
+            return 0.0
+        self.next_s += self.period_s
+        late = max(0.0, now - self.next_s)
+        if late > self.period_s:
+            self.overruns += 1
+            self.next_s = now
+        return late
+
+
+class RtdeRobot:
+    """A UR controller over RTDE with ur-rtde (installed with `pip install "hoh-cosim[hardware]"`)."""
+
+    def __init__(
+        self,
+        host: str,
+        *,
+        frequency_hz: float = -1.0,
+        watchdog_hz: float = 20.0,
+        stop_deceleration: float = 2.0,
+        rt_priority: int = 0,
+    ) -> None:
+        self.host = host
+        self.rt_priority = rt_priority
+        self.frequency_hz = frequency_hz
+        self.watchdog_hz = watchdog_hz
+        self.stop_deceleration = stop_deceleration
+        self.period_s = 1.0 / frequency_hz if frequency_hz > 0 else math.nan
+        self._control: Any = None
+        self._receive: Any = None
+
+    def describe(self) -> str:
+        return f"UR controller at {self.host} (RTDE)"
+
+    def connect(self) -> None:
+        try:
+            import rtde_control
+            import rtde_receive
+        except ImportError:
+            raise RunError('ur-rtde is not installed: pip install "hoh-cosim[hardware]"') from None
+        try:
+            self._receive = rtde_receive.RTDEReceiveInterface(
+                self.host, self.frequency_hz, rt_priority=self.rt_priority
+            )
+            self._control = rtde_control.RTDEControlInterface(
+                self.host, self.frequency_hz, rt_priority=self.rt_priority
+            )
+        except RuntimeError as exc:
+            self.close()
+            raise RunError(f"{self.describe()}: cannot connect: {exc}") from None
+        if not self._control.setWatchdog(self.watchdog_hz):
+            self.stop()
+            raise RunError(f"{self.describe()}: the watchdog could not be enabled")
+        if math.isnan(self.period_s):
+            self.period_s = float(self._control.getStepTime())
+
+    def pacer(self) -> _RtdePacer:
+        control, _ = self._need()
+        return _RtdePacer(control, self.period_s)
+
+    def _need(self) -> tuple[Any, Any]:
+        if self._control is None or self._receive is None:
+            raise RunError(f"{self.describe()}: not connected")
+        return self._control, self._receive
+
+    def state(self) -> RobotState:
+        control, receive = self._need()
+        pose = receive.getActualTCPPose()
+        return RobotState(
+            p_BT_B=np.array(pose[:3], dtype=float),
+            R_BT=rotvec_to_matrix(pose[3:]),
+            twist_B=np.array(receive.getActualTCPSpeed(), dtype=float),
+            robot_mode=int(receive.getRobotMode()),
+            safety_mode=int(receive.getSafetyMode()),
+            protective_stop=bool(receive.isProtectiveStopped()),
+            emergency_stop=bool(receive.isEmergencyStopped()),
+            program_running=bool(control.isProgramRunning()),
+            timestamp_s=float(receive.getTimestamp()),
+        )
+
+    def speed_l(self, twist_B: Vec, acceleration: float) -> None:
+        control, _ = self._need()
+        if not control.speedL([float(x) for x in twist_B], float(acceleration), 0.0):
+            raise RunError(f"{self.describe()}: speedL was refused")
+
+    def kick_watchdog(self) -> None:
+        control, _ = self._need()
+        control.kickWatchdog()
+
+    def stop(self) -> None:
+        control = self._control
+        if control is None:
+            return
+        with contextlib.suppress(Exception):
+            control.speedStop(self.stop_deceleration)
+        with contextlib.suppress(Exception):
+            control.stopScript()
+
+    def close(self) -> None:
+        for interface in (self._control, self._receive):
+            if interface is not None:
+                with contextlib.suppress(Exception):
+                    interface.disconnect()
+        self._control = self._receive = None

@@ -1,0 +1,66 @@
+"""The cycle pacer and the robot state's verdict, without a robot."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, Pacer, RobotState
+
+
+def state(**changes) -> RobotState:
+    values = dict(
+        p_BT_B=np.zeros(3),
+        R_BT=np.eye(3),
+        twist_B=np.zeros(6),
+        robot_mode=ROBOT_MODE_RUNNING,
+        safety_mode=1,
+        protective_stop=False,
+        emergency_stop=False,
+        program_running=True,
+        timestamp_s=0.0,
+    )
+    values.update(changes)
+    return RobotState(**values)
+
+
+@pytest.mark.parametrize(
+    ("changes", "problem"),
+    [
+        ({}, None),
+        ({"emergency_stop": True, "protective_stop": True}, "the robot is emergency-stopped"),
+        ({"protective_stop": True}, "the robot is in a protective stop"),
+        ({"program_running": False}, "the control program on the robot is not running"),
+        ({"robot_mode": 5}, "the robot is not running (robot mode 5)"),
+    ],
+)
+def test_the_state_says_why_the_robot_cannot_be_commanded(changes, problem):
+    assert state(**changes).problem() == problem
+
+
+def test_the_pacer_keeps_an_absolute_schedule():
+    period = 0.004
+    pacer = Pacer(period)
+    start = time.perf_counter()
+    assert pacer.wait() == 0.0  # the first cycle starts the schedule
+    for _ in range(50):
+        pacer.wait()
+    elapsed = time.perf_counter() - start
+    # 50 periods after the first start, not 50 periods plus the work between the waits
+    assert elapsed == pytest.approx(50 * period, abs=0.5 * period)
+    assert pacer.overruns == 0
+
+
+def test_a_late_cycle_is_reported_and_an_overrun_restarts_the_schedule():
+    period = 0.002
+    pacer = Pacer(period)
+    pacer.wait()
+    pacer.wait()
+    time.sleep(5 * period)  # the work of this cycle takes five periods
+    late = pacer.wait()
+    assert late > 3 * period
+    assert pacer.overruns == 1
+    # the schedule restarted from now: the next cycle is on time, not four periods behind
+    assert pacer.wait() < period
