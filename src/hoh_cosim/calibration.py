@@ -27,10 +27,12 @@ __all__ = [
     "CALIBRATION_FORMAT",
     "POSE_COLUMNS",
     "calibration_to_dict",
+    "poses_csv_text",
     "read_calibration",
     "read_poses_csv",
     "write_calibration",
     "write_json_atomic",
+    "write_poses_csv",
 ]
 
 POSE_COLUMNS = ("rx", "ry", "rz", "fx", "fy", "fz", "tx", "ty", "tz")
@@ -97,6 +99,30 @@ def read_poses_csv(path: str | os.PathLike[str]) -> tuple[Vec, Vec]:
     data = np.array(values)
     R_BS = np.array([rotvec_to_matrix(r) for r in data[:, :3]])
     return R_BS, data[:, 3:]
+
+
+def poses_csv_text(R_BS: Vec, wrench: Vec) -> str:
+    """POSES.csv content: one row per pose, the rotation vector of R_BS and the averaged reading."""
+    from hoh_cosim.control.frames import matrix_to_rotvec
+
+    lines = [",".join(POSE_COLUMNS)]
+    for R, w in zip(R_BS, wrench, strict=True):
+        values = np.concatenate([matrix_to_rotvec(R), w])
+        lines.append(",".join(f"{v:.10g}" for v in values))
+    return "\n".join(lines) + "\n"
+
+
+def write_poses_csv(path: str | os.PathLike[str], R_BS: Vec, wrench: Vec) -> None:
+    """POSES.csv written atomically (write beside, then rename)."""
+    path = Path(path)
+    fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(poses_csv_text(R_BS, wrench))
+        os.replace(part, path)
+    except BaseException:
+        Path(part).unlink(missing_ok=True)
+        raise
 
 
 def calibration_to_dict(cal: GravityCalibration) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from hoh_cosim.control.limits import clamp_speed
 from hoh_cosim.control.vectors import Rot3, Vec, as_scalar
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["PoseSequencer", "SequencerParams", "tilted_orientations"]
+__all__ = ["PoseSequencer", "SequencerParams", "servo_twist", "tilted_orientations"]
 
 
 @dataclass(frozen=True)
@@ -114,6 +114,17 @@ def tilted_orientations(R_start: Rot3, params: SequencerParams) -> list[Rot3]:
     return out
 
 
+def servo_twist(
+    p_target: Vec, R_target: Rot3, p_now: Vec, R_now: Rot3, params: SequencerParams
+) -> Vec:
+    """The speedL twist towards a pose: v = k_p (p* - p), ω = k_r log(R* Rᵀ), each speed-limited."""
+    v = params.gain_position * (p_target - p_now)
+    w = params.gain_orientation * matrix_to_rotvec(R_target @ R_now.T)
+    v, _ = clamp_speed(v, params.max_linear_speed)
+    w, _ = clamp_speed(w, params.max_angular_speed)
+    return np.concatenate([v, w])
+
+
 class PoseSequencer:
     """Servo through the calibration poses under the block contract."""
 
@@ -155,11 +166,8 @@ class PoseSequencer:
             return self._out(
                 np.zeros(6), index + 1, holding=phase >= p.move_s + p.settle_s, done=False
             )
-        v = p.gain_position * (self._start[0] - p_now)
-        w = p.gain_orientation * matrix_to_rotvec(self._targets[index] @ R_now.T)
-        v, _ = clamp_speed(v, p.max_linear_speed)
-        w, _ = clamp_speed(w, p.max_angular_speed)
-        return self._out(np.concatenate([v, w]), index + 1, holding=False, done=False)
+        twist = servo_twist(self._start[0], self._targets[index], p_now, R_now, p)
+        return self._out(twist, index + 1, holding=False, done=False)
 
     @staticmethod
     def _out(twist: Vec, index: int, holding: bool, done: bool) -> dict[str, Vec]:

@@ -188,19 +188,8 @@ def pose_averages(
     return np.array(Rs).reshape(-1, 3, 3), np.array(means).reshape(-1, 6), np.array(counts)
 
 
-def poses_csv(R_BS: np.ndarray, wrench: np.ndarray) -> str:
-    """The averages in the POSES.csv format `hoh-cosim identify-gravity` reads."""
-    from hoh_cosim.control.frames import matrix_to_rotvec
-
-    lines = ["rx,ry,rz,fx,fy,fz,tx,ty,tz"]
-    for R, w in zip(R_BS, wrench, strict=True):
-        values = np.concatenate([matrix_to_rotvec(R), w])
-        lines.append(",".join(f"{v:.10g}" for v in values))
-    return "\n".join(lines) + "\n"
-
-
 def _gravity_calibration(scenario: Scenario, rec: Recording, report: Report) -> None:
-    from hoh_cosim.calibration import calibration_to_dict
+    from hoh_cosim.calibration import calibration_to_dict, poses_csv_text
 
     seq, plant, ft = (_component(scenario, k) for k in ("sequencer", "plant", "ft150"))
     R_BS, wrench, counts = pose_averages(rec, seq, plant, ft)
@@ -218,7 +207,7 @@ def _gravity_calibration(scenario: Scenario, rec: Recording, report: Report) -> 
     m["poses"] = len(counts)
     m["packets_per_pose_min"] = int(counts.min()) if len(counts) else 0
     if len(counts):
-        report.files["poses.csv"] = poses_csv(R_BS, wrench)
+        report.files["poses.csv"] = poses_csv_text(R_BS, wrench)
     try:
         cal = identify_gravity(R_BS, wrench, plant.params.g_B)
     except IdentificationError as exc:

@@ -1,0 +1,168 @@
+"""`hoh-cosim replay LOG.mcap [--set ...]`: the estimator and controller again, on recorded data.
+
+A session log holds, for every cycle, exactly what the estimator and the controller were given (the
+raw FT-150 and FSE103 samples with their counters, the robot's pose) and the parameters they ran
+with. Replaying feeds the same inputs to fresh blocks with other settings and compares the new
+estimates and commands with the recorded ones: that is how one tunes on real data. Without `--set`
+the replay reproduces the recording exactly (a test holds it to that).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hoh_cosim.control.controller import ControllerParams, HandGuidingController
+from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.errors import ConfigError, InputFileError
+from hoh_cosim.hardware.session_log import Session, read_session
+from hoh_cosim.params import override, with_values
+from hoh_cosim.yamlfile import parse_value
+
+__all__ = ["ReplayResult", "replay", "replay_parameters"]
+
+
+@dataclass
+class ReplayResult:
+    session: Session
+    t: np.ndarray
+    old: dict[str, np.ndarray]  # recorded: F_hand_B, twist_B, status
+    new: dict[str, np.ndarray]  # replayed
+    estimator: EstimatorParams
+    controller: ControllerParams
+
+    def summary(self) -> dict[str, Any]:
+        dv = self.new["twist_B"][:, :3] - self.old["twist_B"][:, :3]
+        dF = self.new["F_hand_B"] - self.old["F_hand_B"]
+        speed = {
+            k: np.linalg.norm(v["twist_B"][:, :3], axis=1)
+            for k, v in (("old", self.old), ("new", self.new))
+        }
+        return {
+            "cycles": len(self.t),
+            "complete_log": self.session.complete,
+            "speed_rms_old_m_s": float(np.sqrt(np.mean(speed["old"] ** 2))),
+            "speed_rms_new_m_s": float(np.sqrt(np.mean(speed["new"] ** 2))),
+            "twist_difference_max_m_s": float(np.max(np.linalg.norm(dv, axis=1))),
+            "hand_force_difference_rms_N": float(np.sqrt(np.mean(np.sum(dF * dF, axis=1)))),
+            "stops_old": int(np.count_nonzero(self.old["status"] & 0xF00)),
+            "stops_new": int(np.count_nonzero(self.new["status"] & 0xF00)),
+        }
+
+
+def replay_parameters(session: Session) -> tuple[EstimatorParams, ControllerParams, float]:
+    """The estimator's and controller's parameters and the period the session ran with."""
+    recorded = [m for m in session.messages.get("/events", []) if m.get("event") == "parameters"]
+    if not recorded:
+        raise InputFileError(
+            session.path, "/events", "no 'parameters' event: the session ended before its loop"
+        )
+    p = json.loads(recorded[0]["detail"])
+    try:
+        estimator = with_values(EstimatorParams(), p["estimator"])
+        controller = with_values(ControllerParams(), p["controller"])
+    except ConfigError as exc:
+        raise InputFileError(session.path, "/events parameters", str(exc)) from None
+    return estimator, controller, float(p["period_s"])
+
+
+def _by_cycle(session: Session, topic: str) -> dict[int, dict[str, Any]]:
+    return {m["k"]: m for m in session.messages.get(topic, [])}
+
+
+def _vector(values: list[Any]) -> np.ndarray:
+    return np.array([math.nan if x is None else x for x in values], dtype=float)
+
+
+def replay(path: str | Path, overrides: Sequence[str] = ()) -> ReplayResult:
+    """Replay a session log with `overrides` (`estimator.x=v`, `controller.x=v`)."""
+    session = read_session(path)
+    estimator_params, controller_params, period = replay_parameters(session)
+    params: dict[str, Any] = {"estimator": estimator_params, "controller": controller_params}
+    for text in overrides:
+        target, sep, value_text = text.partition("=")
+        block, _, name = target.partition(".")
+        if not sep or not name or block not in params:
+            raise ConfigError(
+                f"--set {text}: expected estimator.parameter=value or controller.parameter=value"
+            )
+        params[block] = override(
+            params[block], name, parse_value(text, value_text), f"--set {block}"
+        )
+    R_TS = np.asarray(session.metadata.get("R_TS", np.eye(3)), dtype=float)
+    robot, ft, probe = (_by_cycle(session, t) for t in ("/robot", "/ft150", "/fse103"))
+    estimates, commands = _by_cycle(session, "/estimate"), _by_cycle(session, "/command")
+    cycles = sorted(k for k in commands if k in robot and k in estimates)
+    if not cycles:
+        raise InputFileError(session.path, "/command", "no control cycle was recorded")
+    estimator = Estimator(params["estimator"])
+    controller = HandGuidingController(params["controller"])
+    old: dict[str, list[Any]] = {"F_hand_B": [], "twist_B": [], "status": []}
+    new: dict[str, list[Any]] = {"F_hand_B": [], "twist_B": [], "status": []}
+    t_list = []
+    for k in cycles:
+        r = robot[k]
+        f = ft.get(k)
+        pr = probe.get(k)
+        t = k * period
+        R_BT = _vector(r["R_BT"]).reshape(3, 3)
+        estimate = estimator.step(
+            t,
+            period,
+            {
+                "wrench_S": _vector(f["wrench_S"]) if f else np.zeros(6),
+                "ft_counter": np.array([float(f["count"]) if f else 0.0]),
+                "force_P": _vector(pr["force_P"]) if pr else np.zeros(3),
+                "probe_counter": np.array([float(pr["count"]) if pr else 0.0]),
+                "R_BS": (R_BT @ R_TS).reshape(9),
+            },
+        )
+        out = controller.step(t, period, {**estimate, "p_BT_B": _vector(r["p_BT_B"])})
+        t_list.append(t)
+        old["F_hand_B"].append(_vector(estimates[k]["F_hand_B"]))
+        old["twist_B"].append(_vector(commands[k]["twist_B"]))
+        old["status"].append(int(commands[k]["status"]))
+        new["F_hand_B"].append(estimate["F_hand_B"].copy())
+        new["twist_B"].append(out["twist_B"].copy())
+        new["status"].append(int(out["status"][0]))
+    return ReplayResult(
+        session,
+        np.array(t_list),
+        {k: np.array(v) for k, v in old.items()},
+        {k: np.array(v) for k, v in new.items()},
+        params["estimator"],
+        params["controller"],
+    )
+
+
+def plot_replay(result: ReplayResult) -> bytes:
+    """Recorded against replayed: the hand-force estimate and the commanded velocity."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 3, sharex=True, figsize=(12, 6))
+    for j, axis in enumerate("xyz"):
+        axes[0, j].plot(result.t, result.old["F_hand_B"][:, j], lw=0.8, label="recorded")
+        axes[0, j].plot(result.t, result.new["F_hand_B"][:, j], lw=0.8, label="replayed")
+        axes[0, j].set_ylabel(f"F_hand {axis} [N]")
+        axes[1, j].plot(result.t, 1e3 * result.old["twist_B"][:, j], lw=0.8, label="recorded")
+        axes[1, j].plot(result.t, 1e3 * result.new["twist_B"][:, j], lw=0.8, label="replayed")
+        axes[1, j].set_ylabel(f"v {axis} [mm/s]")
+        axes[1, j].set_xlabel("time [s]")
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle(f"{result.session.path.name}: recorded and replayed")
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    plt.close(fig)
+    return buffer.getvalue()
