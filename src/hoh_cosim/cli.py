@@ -4,6 +4,8 @@
                             [--set component.parameter=value ...]
     hoh-cosim build-fmus [--out DIR]
     hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
+    hoh-cosim hw run|calibrate|sensors|rehearse ...   (see hoh_cosim.hardware.commands)
+    hoh-cosim replay LOG.mcap [--set ...] [--out DIR]
 
 Exit status: 0 done; 2 the input is wrong (one line naming the file and the place); 1 the run failed.
 """
@@ -19,12 +21,14 @@ import numpy as np
 
 from hoh_cosim import __version__
 from hoh_cosim.errors import ConfigError, HohError, RunError
+from hoh_cosim.hardware.commands import add_commands as add_hardware_commands
+from hoh_cosim.hardware.commands import run_command as run_hardware_command
 
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
-SUBCOMMANDS = ("build-fmus", "identify-gravity")
+SUBCOMMANDS = ("build-fmus", "identify-gravity", "hw", "replay")
 
 
 class _ArgumentParser(argparse.ArgumentParser):
@@ -90,6 +94,7 @@ def _main_parser() -> argparse.ArgumentParser:
         metavar="GX,GY,GZ",
         help="gravity in the base frame, m/s² (default: 0,0,-9.81)",
     )
+    add_hardware_commands(sub)
     return parser
 
 
@@ -243,6 +248,9 @@ def _main(argv: list[str]) -> int:
             return _identify_gravity(args)
         if args.command == "build-fmus":
             return _build_fmus(args)
+        status = run_hardware_command(args)
+        if status is not None:
+            return status
         _main_parser().print_help()
         return EXIT_BAD_INPUT
     except RunError as exc:

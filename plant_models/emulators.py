@@ -1,0 +1,430 @@
+"""Devices without hardware, for rehearsing the hardware runner: the same bytes, the same timing.
+
+A `World` runs in a process of its own (so it never competes with the runner for the interpreter)
+and advances the simulated world of this package in real time, 1 ms a tick:
+
+- the arm under speedL, the tool, the phantom and the operator's hand (`Plant`, `Operator`);
+- an FT-150 stream server on loopback: the FT-150 model's packets, as the URCap's daemon writes
+  them, to one TCP client at a time (a second client is turned away);
+- an FSE103 on a pseudo-terminal in raw mode: the FSE103 model's packets as serial frames;
+- the robot's side of `SimulatedRobot`: state out and commands in through shared memory, with the UR
+  controller's habits: the watchdog (no kick for 1/watchdog_hz s: the program stops), speedStop,
+  stopScript, a protective stop.
+
+Faults are scheduled at world times: `probe_unplug` (the pty's master closes), `ft_stall` (the stream
+stays open and goes quiet), `ft_garbage` / `probe_garbage` (junk bytes in the stream), `ft_nan` (a
+sample of NaNs), `force_spike` (40 N more on the probe sensor from then on), `protective_stop`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import multiprocessing as mp
+import os
+import pty
+import queue
+import socket
+import time
+import tty
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hoh_cosim.control.vectors import Vec
+from hoh_cosim.errors import ConfigError, RunError
+from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pacer, RobotState
+from plant_models.arm import ArmParams
+from plant_models.operator import TASKS, Operator, OperatorParams
+from plant_models.plant import Plant, PlantParams
+from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Params, FT150Sensor
+from plant_models.tissue import PhantomParams
+
+__all__ = ["FAULTS", "Fault", "RehearsalWorld", "SimulatedRobot", "WorldSetup"]
+
+FAULTS = (
+    "probe_unplug",
+    "ft_stall",
+    "ft_garbage",
+    "probe_garbage",
+    "ft_nan",
+    "force_spike",
+    "protective_stop",
+)
+WORLD_DT = 1e-3
+
+# shared memory: [sequence, values...], written under a sequence lock (no lock a reader could
+# wait on: the world runs at a lower priority than the runner, which must never wait for it)
+_STATE = 3 + 9 + 6 + 6  # p, R, twist, [mode, safety, protective, emergency, program, time]
+_COMMAND = 6 + 4  # twist, [acceleration, kick time, stop, sequence]
+
+
+class _SeqLock:
+    """One writer, any readers, no waiting: the writer makes the sequence odd, writes, makes it
+    even; a reader copies and keeps the copy only if the sequence was even and unchanged around it."""
+
+    def __init__(self, shared: Any) -> None:
+        self.array = np.frombuffer(shared, dtype=np.float64)
+        self.last = self.array[1:].copy()
+
+    def write(self, values: Vec, at: slice | int = slice(None)) -> None:
+        data = self.array[1:]
+        self.array[0] += 1.0
+        data[at] = values
+        self.array[0] += 1.0
+
+    def read(self, tries: int = 1000) -> Vec:
+        """The latest consistent copy. A writer caught mid-write is not waited for beyond `tries`:
+        it may be a lower-priority process that the scheduler has put aside (priority inversion),
+        so the previous copy, at most one write old, is returned instead."""
+        for _ in range(tries):
+            before = self.array[0]
+            copy = self.array[1:].copy()
+            if before % 2.0 == 0.0 and self.array[0] == before:
+                self.last = copy
+                return copy
+        return self.last.copy()
+
+
+@dataclass(frozen=True)
+class Fault:
+    at_s: float
+    kind: str
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULTS:
+            raise ConfigError(f"fault: expected one of {', '.join(FAULTS)}, got {self.kind!r}")
+
+
+@dataclass(frozen=True)
+class WorldSetup:
+    """What to rehearse: the robot's rate, the operator's task, the sensors, the faults."""
+
+    robot_rate_hz: float = 500.0
+    watchdog_hz: float = 20.0
+    task: str = "circle"
+    task_start_s: float = 4.0  # the hand takes the handle then (after the runner's rebias)
+    phantom_below_m: float | None = None  # a flat phantom this far below the tip (press tasks)
+    ft_rate_hz: float = 200.0
+    probe_framing: str = "seed18"
+    probe_byte_order: str = "little"
+    seed: int = 1
+    faults: tuple[Fault, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {self.task!r}")
+
+
+def _world_main(setup: WorldSetup, state: Any, command: Any, ready: Any, stop: Any) -> None:
+    # the devices yield to the runner: on a rig they are separate hardware, here they share cores
+    with contextlib.suppress(OSError):
+        os.nice(10)
+    try:
+        world = _World(setup, state, command)
+    except Exception as exc:  # report, do not hang the parent
+        ready.put(("error", f"{type(exc).__name__}: {exc}"))
+        return
+    ready.put(("ready", world.ft_port, world.pty_name, world.truth()))
+    try:
+        world.run(stop)
+    finally:
+        world.close()
+
+
+class _World:
+    def __init__(self, setup: WorldSetup, state: Any, command: Any) -> None:
+        from hoh_cosim.hardware.fse103 import encode_frame
+        from hoh_cosim.hardware.ft150 import encode_sample
+
+        self.setup = setup
+        self.encode_sample, self.encode_frame = encode_sample, encode_frame
+        self.state, self.command = _SeqLock(state), _SeqLock(command)
+        arm = ArmParams(rate_hz=setup.robot_rate_hz)
+        phantom = PhantomParams(shape="none")
+        if setup.phantom_below_m is not None:
+            tip = Plant(PlantParams(arm=arm)).initial_outputs()["p_BT_B"]
+            phantom = PhantomParams(
+                shape="plane", plane_point_B=[0.0, 0.0, float(tip[2]) - setup.phantom_below_m]
+            )
+        self.plant = Plant(PlantParams(arm=arm, phantom=phantom))
+        self.operator = Operator(OperatorParams(task=setup.task, start_s=setup.task_start_s))
+        rng = np.random.default_rng(setup.seed)
+        self.ft = FT150Sensor(FT150Params(rate_hz=setup.ft_rate_hz), rng=rng)
+        self.probe = FSE103Sensor(FSE103Params(), rng=rng)
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.listener.setblocking(False)
+        self.ft_port = self.listener.getsockname()[1]
+        self.client: socket.socket | None = None
+        master, slave = pty.openpty()
+        tty.setraw(master)
+        tty.setraw(slave)
+        # a device does not wait for its reader: with nobody reading, the frames are lost (a
+        # blocking write would stall the whole world once the terminal's buffer is full)
+        os.set_blocking(master, False)
+        self.pty_master: int | None = master
+        self.pty_slave = slave  # kept open so that the device exists until unplugged
+        self.pty_name = os.ttyname(slave)
+        self.faults = sorted(setup.faults, key=lambda f: f.at_s)
+        self.ft_stalled = self.protective = self.program_stopped = False
+        self.spike = 0.0
+        self.nan_next = False
+        self.outputs = self.plant.initial_outputs()
+        self.hand = {"F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3)}
+
+    def truth(self) -> dict[str, Any]:
+        """What a perfect calibration would find: the tool and the FT-150's offset."""
+        tool = self.plant.params.tool
+        return {
+            "mass_kg": tool.mass_kg,
+            "com_m": tool.p_SC_S.tolist(),
+            "bias": self.ft.params.offset.tolist(),
+            "gravity_B": self.plant.params.g_B.tolist(),
+        }
+
+    # --- I/O -----------------------------------------------------------------------------------
+
+    def _accept(self) -> None:
+        with contextlib.suppress(BlockingIOError):
+            client, _ = self.listener.accept()
+            if self.client is None:
+                client.setblocking(False)
+                client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                self.client = client
+            else:  # one client at a time, as the daemon
+                client.close()
+
+    def _send_ft(self, data: bytes) -> None:
+        if self.client is None or self.ft_stalled:
+            return
+        try:
+            self.client.sendall(data)
+        except (BlockingIOError, OSError):
+            self.client.close()
+            self.client = None
+
+    def _send_probe(self, data: bytes) -> None:
+        if self.pty_master is None:
+            return
+        with contextlib.suppress(OSError):  # BlockingIOError: the buffer is full, nobody reads
+            os.write(self.pty_master, data)
+
+    def _fault(self, kind: str) -> None:
+        if kind == "probe_unplug" and self.pty_master is not None:
+            os.close(self.pty_master)
+            os.close(self.pty_slave)
+            self.pty_master = None
+        elif kind == "ft_stall":
+            self.ft_stalled = True
+        elif kind == "ft_garbage":
+            self._send_ft(b"(( 1.2 , x7 ) junk \x00\xff ( 3 , 4 )")
+        elif kind == "probe_garbage":
+            self._send_probe(bytes(range(7, 40)))
+        elif kind == "ft_nan":
+            self.nan_next = True
+        elif kind == "force_spike":
+            self.spike = 40.0
+        elif kind == "protective_stop":
+            self.protective = True
+
+    # --- the robot's side of the shared memory ------------------------------------------------
+
+    def _command(self, now: float) -> Vec:
+        c = self.command.read()
+        twist, kick, stop = c[:6], c[7], c[8]
+        if stop > 0.5:
+            self.program_stopped = True
+        if kick > 0.0 and now - kick > 1.0 / self.setup.watchdog_hz:
+            self.program_stopped = True  # the watchdog: the program on the robot halts
+        if self.program_stopped or self.protective:
+            return np.zeros(6)
+        return twist
+
+    def _publish(self, t: float) -> None:
+        o = self.outputs
+        flags = [
+            float(ROBOT_MODE_RUNNING),
+            3.0 if self.protective else float(SAFETY_MODE_NORMAL),
+            float(self.protective),
+            0.0,
+            0.0 if self.program_stopped else 1.0,
+            t,
+        ]
+        self.state.write(np.concatenate([o["p_BT_B"], o["R_BT"], o["twist_B"], flags]))
+
+    # --- the loop ------------------------------------------------------------------------------
+
+    def run(self, stop: Any) -> None:
+        pacer = Pacer(WORLD_DT, spin_s=0.0)  # sleep only: the world catches up when late
+        k = 0
+        start = time.perf_counter()
+        while not stop.is_set():
+            pacer.wait()
+            # after a stall of this process, catch up: the world keeps to real time
+            behind = int((time.perf_counter() - start) / WORLD_DT) - k
+            for _ in range(max(1, min(behind, 50))):
+                self._tick(k * WORLD_DT)
+                k += 1
+            self._publish(k * WORLD_DT)
+
+    def _tick(self, t: float) -> None:
+        while self.faults and self.faults[0].at_s <= t:
+            self._fault(self.faults.pop(0).kind)
+        if round(t / WORLD_DT) % 20 == 0:  # look for a client every 20 ms
+            self._accept()
+        twist = self._command(time.monotonic())
+        hand = self.operator.step(t, WORLD_DT, self.outputs)
+        self.outputs = self.plant.step(
+            t,
+            WORLD_DT,
+            {"twist_cmd_B": twist, "F_hand_B": hand["F_hand_B"], "tau_hand_B": hand["tau_hand_B"]},
+        )
+        before = self.ft.clock.delivered
+        ft = self.ft.step(t, WORLD_DT, {"wrench_S_true": self.outputs["wrench_S"]})
+        if self.ft.clock.delivered != before:
+            values = ft["wrench_S"]
+            if self.nan_next:
+                values, self.nan_next = np.full(6, math.nan), False
+            self._send_ft(self.encode_sample(values))
+        before = self.probe.clock.delivered
+        force = self.outputs["force_P"] + np.array([0.0, 0.0, self.spike])
+        probe = self.probe.step(t, WORLD_DT, {"force_P_true": force})
+        if self.probe.clock.delivered != before:
+            self._send_probe(
+                self.encode_frame(
+                    probe["force_P"],
+                    int(1e3 * t) & 0xFFFFFFFF,
+                    framing=self.setup.probe_framing,
+                    byte_order=self.setup.probe_byte_order,
+                )
+            )
+
+    def close(self) -> None:
+        for closer in (
+            lambda: self.client and self.client.close(),
+            self.listener.close,
+            lambda: self.pty_master is not None and os.close(self.pty_master),
+            lambda: self.pty_master is not None and os.close(self.pty_slave),
+        ):
+            with contextlib.suppress(OSError):
+                closer()
+
+
+class RehearsalWorld:
+    """The world process, started and stopped from the runner's side."""
+
+    def __init__(self, setup: WorldSetup) -> None:
+        self.setup = setup
+        context = mp.get_context("spawn")  # a clean interpreter: no threads or sockets inherited
+        self.state = context.RawArray("d", 1 + _STATE)
+        self.command = context.RawArray("d", 1 + _COMMAND)
+        self._state, self._command = _SeqLock(self.state), _SeqLock(self.command)
+        self._ready = context.Queue()
+        self._stop = context.Event()
+        self._process = context.Process(
+            target=_world_main,
+            args=(setup, self.state, self.command, self._ready, self._stop),
+            name="rehearsal-world",
+            daemon=True,
+        )
+        self.ft_port = 0
+        self.pty_name = ""
+        self.truth: dict[str, Any] = {}
+
+    def start(self, timeout_s: float = 60.0) -> RehearsalWorld:
+        self._process.start()
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                message = self._ready.get(timeout=0.2)
+                break
+            except queue.Empty:
+                if not self._process.is_alive():
+                    raise RunError(
+                        f"the rehearsal world exited at start (status {self._process.exitcode})"
+                    ) from None
+                if time.monotonic() > deadline:
+                    self.stop()
+                    raise RunError(
+                        f"the rehearsal world did not start within {timeout_s:g} s"
+                    ) from None
+        if message[0] == "error":
+            self.stop()
+            raise RunError(f"the rehearsal world failed to start: {message[1]}")
+        _, self.ft_port, self.pty_name, self.truth = message
+        return self
+
+    def robot(self) -> SimulatedRobot:
+        return SimulatedRobot(self, 1.0 / self.setup.robot_rate_hz)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._process.join(5.0)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join(1.0)
+
+    def __enter__(self) -> RehearsalWorld:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+class SimulatedRobot:
+    """The rehearsal's robot: `hoh_cosim.hardware.robot.Robot`'s methods over shared memory."""
+
+    def __init__(self, world: RehearsalWorld, period_s: float) -> None:
+        self.world = world
+        self.period_s = period_s
+        self._seq = 0.0
+
+    def describe(self) -> str:
+        return "simulated UR5 (rehearsal)"
+
+    def connect(self) -> None:
+        if not self.world._process.is_alive():
+            raise RunError(f"{self.describe()}: the rehearsal world is not running")
+        self._write(np.zeros(6), 1.0, stop=False)
+
+    def pacer(self) -> Pacer:
+        return Pacer(self.period_s)
+
+    def state(self) -> RobotState:
+        s = self.world._state.read(tries=3)
+        return RobotState(
+            p_BT_B=s[0:3],
+            R_BT=s[3:12].reshape(3, 3),
+            twist_B=s[12:18],
+            robot_mode=int(s[18]),
+            safety_mode=int(s[19]),
+            protective_stop=bool(s[20]),
+            emergency_stop=bool(s[21]),
+            program_running=bool(s[22]),
+            timestamp_s=float(s[23]),
+        )
+
+    def _write(self, twist: Vec, acceleration: float, *, stop: bool) -> None:
+        self._seq += 1.0
+        self.world._command.write(np.concatenate([twist, [acceleration]]), slice(0, 7))
+        self.world._command.write(np.array([1.0 if stop else 0.0, self._seq]), slice(8, 10))
+
+    def speed_l(self, twist_B: Vec, acceleration: float) -> None:
+        self._write(twist_B, acceleration, stop=False)
+
+    def kick_watchdog(self) -> None:
+        self.world._command.write(np.array([time.monotonic()]), slice(7, 8))
+
+    def stop(self, timeout_s: float = 1.0) -> None:
+        """Stop the arm and the program; like ur-rtde's stopScript, return once the robot says
+        the program has stopped (or after `timeout_s`, the world being gone)."""
+        self._write(np.zeros(6), 0.0, stop=True)
+        deadline = time.monotonic() + timeout_s
+        while self.world._process.is_alive() and time.monotonic() < deadline:
+            if not self.state().program_running:
+                return
+            time.sleep(0.001)
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,364 @@
+"""The hardware commands of `hoh-cosim`:
+
+    hoh-cosim hw run CONFIG.yaml [--seconds S] [--log FILE] [--set block.parameter=value ...]
+    hoh-cosim hw calibrate CONFIG.yaml [--out FILE] [--samples N] [--tilts N] [--directions N]
+    hoh-cosim hw sensors [--ft HOST[:PORT]] [--probe DEVICE] [--seconds S] [--json]
+    hoh-cosim hw rehearse [--seconds S] [--task TASK] [--rate HZ] [--fault KIND@SECONDS ...]
+    hoh-cosim replay LOG.mcap [--set block.parameter=value ...] [--out DIR]
+
+Exit status as everywhere: 0 done, 2 the input is wrong, 1 the session ended on a fault.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from hoh_cosim.errors import ConfigError, RunError
+
+__all__ = ["add_commands", "run_command"]
+
+TASKS = ("off", "hold", "circle", "line", "press", "scan", "push_release")
+
+
+def _endpoint(text: str) -> tuple[str, int]:
+    host, _, port = text.partition(":")
+    if not host:
+        raise argparse.ArgumentTypeError(f"expected HOST or HOST:PORT, got {text!r}")
+    if not port:
+        return host, 63351
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port 1 to 65535, got {port!r}")
+    return host, int(port)
+
+
+def _fault(text: str) -> Any:
+    from plant_models.emulators import FAULTS, Fault
+
+    kind, _, at = text.partition("@")
+    try:
+        at_s = float(at)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected KIND@SECONDS, got {text!r}") from None
+    if kind not in FAULTS:
+        raise argparse.ArgumentTypeError(f"expected one of {', '.join(FAULTS)}, got {kind!r}")
+    return Fault(at_s, kind)
+
+
+def add_commands(sub: Any) -> None:
+    """The `hw` and `replay` subcommands, on the main parser's subparsers."""
+    hw = sub.add_parser(
+        "hw",
+        help="run, calibrate, diagnose or rehearse on the robot",
+        description="Commands for the real UR5, its FT-150 and its FSE103.",
+    )
+    hw_sub = hw.add_subparsers(dest="hw_command", metavar="HW_COMMAND", parser_class=type(hw))
+
+    run = hw_sub.add_parser(
+        "run",
+        help="a hand-guiding session",
+        description="Rebias, then guide the robot by hand until the time is "
+        "up, Ctrl-C, or a fault; every cycle is logged (MCAP).",
+    )
+    run.add_argument("config", metavar="CONFIG.yaml")
+    run.add_argument("--seconds", type=float, metavar="S", help="end after S seconds")
+    run.add_argument(
+        "--log",
+        metavar="FILE",
+        help="the session log (default: in the config's log_dir, named by date and time)",
+    )
+    run.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="B.P=V",
+        help="estimator.x=v or controller.x=v (repeatable)",
+    )
+
+    cal = hw_sub.add_parser(
+        "calibrate",
+        help="the gravity calibration on the robot",
+        description="Move through static poses, average the FT-150 at each, "
+        "identify the tool and write calibration.json (and poses.csv).",
+    )
+    cal.add_argument("config", metavar="CONFIG.yaml")
+    cal.add_argument("--out", metavar="FILE", help="default: the config's calibration file")
+    cal.add_argument(
+        "--samples",
+        type=int,
+        default=1000,
+        metavar="N",
+        help="samples averaged per pose (default 1000, the seed's)",
+    )
+    cal.add_argument(
+        "--tilts", type=int, default=4, metavar="N", help="tilts from 15 to 60 degrees (default 4)"
+    )
+    cal.add_argument(
+        "--directions",
+        type=int,
+        default=8,
+        metavar="N",
+        help="horizontal directions per tilt (default 8)",
+    )
+
+    sensors = hw_sub.add_parser(
+        "sensors",
+        help="read the sensor streams and describe them",
+        description="Read the FT-150 stream and/or the FSE103 for a while "
+        "and print rate, mean, standard deviation and frame counts.",
+    )
+    sensors.add_argument(
+        "--ft",
+        type=_endpoint,
+        metavar="HOST[:PORT]",
+        help="the FT-150 stream (port 63351 by default)",
+    )
+    sensors.add_argument("--probe", metavar="DEVICE", help="the FSE103's serial device")
+    sensors.add_argument("--framing", default="auto", choices=("auto", "seed18", "guide20"))
+    sensors.add_argument("--byte-order", default="auto", choices=("auto", "little", "big"))
+    sensors.add_argument("--seconds", type=float, default=5.0, metavar="S")
+    sensors.add_argument("--json", action="store_true", help="one JSON object on stdout")
+
+    rehearse = hw_sub.add_parser(
+        "rehearse",
+        help="the real runner against emulated devices",
+        description="Run a session with the real runner, drivers and "
+        "log against an emulated UR5, FT-150 stream and FSE103.",
+    )
+    rehearse.add_argument("--seconds", type=float, default=20.0, metavar="S")
+    rehearse.add_argument("--task", choices=TASKS, default="circle")
+    rehearse.add_argument(
+        "--rate",
+        type=float,
+        default=500.0,
+        choices=(125.0, 500.0),
+        help="the robot's rate in Hz: 125 (CB3) or 500 (e-series)",
+    )
+    rehearse.add_argument(
+        "--fault",
+        dest="faults",
+        action="append",
+        default=[],
+        type=_fault,
+        metavar="KIND@S",
+        help="schedule a fault, e.g. ft_stall@12 (repeatable)",
+    )
+    rehearse.add_argument(
+        "--log",
+        metavar="FILE",
+        default=None,
+        help="the session log (default: sessions/rehearsal-<time>.mcap)",
+    )
+    rehearse.add_argument("--rebias-samples", type=int, default=500, metavar="N")
+    rehearse.add_argument(
+        "--rt-priority",
+        type=int,
+        default=None,
+        metavar="P",
+        help="SCHED_FIFO priority for the loop (Linux, needs the right)",
+    )
+
+    rep = sub.add_parser(
+        "replay",
+        help="re-run the estimator and controller on a session log",
+        description="Feed a session log's recorded inputs to the estimator and "
+        "controller with other settings; plot recorded against replayed.",
+    )
+    rep.add_argument("log", metavar="LOG.mcap")
+    rep.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="B.P=V",
+        help="estimator.x=v or controller.x=v (repeatable)",
+    )
+    rep.add_argument("--out", metavar="DIR", help="default: runs/replay-<log name>")
+
+
+def _stamp() -> str:
+    return datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+
+
+def _announce(message: str) -> None:
+    print(message, flush=True)
+
+
+def _report(result: Any, log_path: Path) -> int:
+    print(f"session ended: {result.cause}")
+    print(f"timing: {result.timing.report()}")
+    print(f"log: {log_path}")
+    return 0 if result.clean else 1
+
+
+def _hw_run(args: argparse.Namespace) -> int:
+    from hoh_cosim.calibration import read_calibration
+    from hoh_cosim.hardware.config import load_config
+    from hoh_cosim.hardware.fse103 import FSE103Port
+    from hoh_cosim.hardware.ft150 import FT150Stream, zero_sensor
+    from hoh_cosim.hardware.robot import RtdeRobot
+    from hoh_cosim.hardware.runner import Runner
+    from hoh_cosim.hardware.session_log import SessionLog
+
+    config = load_config(args.config, args.overrides)
+    if config.calibration is None:
+        raise ConfigError(f"{config.path}: calibration: missing (run 'hoh-cosim hw calibrate')")
+    calibration = read_calibration(config.calibration)
+    log_path = Path(args.log) if args.log else config.log_dir / f"session-{_stamp()}.mcap"
+    if config.ft150.zero_on_start:
+        zero_sensor(config.ft150.host)
+    robot = RtdeRobot(
+        config.robot.host,
+        frequency_hz=config.robot.frequency_hz,
+        watchdog_hz=config.robot.watchdog_hz,
+    )
+    ft = FT150Stream(config.ft150.host, config.ft150.port)
+    probe = None
+    if config.probe is not None:
+        probe = FSE103Port(
+            config.probe.device,
+            baudrate=config.probe.baudrate,
+            framing=config.probe.framing,
+            byte_order=config.probe.byte_order,
+        )
+    metadata = {
+        "kind": "session",
+        "config": str(config.path),
+        "robot": config.robot.host,
+        "R_TS": config.robot.R_TS.tolist(),
+        "calibration": str(config.calibration),
+    }
+    log = SessionLog(log_path, metadata).start()
+    runner = Runner(config, robot, ft, probe, calibration, log, announce=_announce)
+    return _report(runner.run(args.seconds), log_path)
+
+
+def _hw_calibrate(args: argparse.Namespace) -> int:
+    from hoh_cosim.calibration import calibration_to_dict
+    from hoh_cosim.control.sequencer import SequencerParams
+    from hoh_cosim.hardware.calibrate import calibrate, save
+    from hoh_cosim.hardware.config import load_config
+    from hoh_cosim.hardware.ft150 import FT150Stream
+    from hoh_cosim.hardware.robot import RtdeRobot
+
+    config = load_config(args.config)
+    out = Path(args.out) if args.out else config.calibration
+    if out is None:
+        raise ConfigError(f"{config.path}: calibration: missing: give --out FILE")
+    params = SequencerParams(tilts=args.tilts, directions=args.directions)
+    robot = RtdeRobot(
+        config.robot.host,
+        frequency_hz=config.robot.frequency_hz,
+        watchdog_hz=config.robot.watchdog_hz,
+    )
+    ft = FT150Stream(config.ft150.host, config.ft150.port)
+    run = calibrate(
+        robot,
+        ft,
+        R_TS=config.robot.R_TS,
+        params=params,
+        samples=args.samples,
+        acceleration=config.robot.acceleration,
+        announce=_announce,
+    )
+    poses = save(run, out)
+    residuals = calibration_to_dict(run.calibration)["residuals"]
+    cal = run.calibration
+    print(
+        f"mass {cal.mass_kg:.5f} ± {cal.mass_se_kg:.5f} kg, centre of mass "
+        f"{[round(x, 5) for x in cal.com_m]} m, from {cal.n_poses} poses"
+    )
+    print("residual RMS before " + " ".join(f"{v:.4f}" for v in residuals["rms_before"]))
+    print("residual RMS after  " + " ".join(f"{v:.4f}" for v in residuals["rms_after"]))
+    print(f"wrote {out} and {poses}")
+    return 0
+
+
+def _hw_sensors(args: argparse.Namespace) -> int:
+    from hoh_cosim.hardware.diagnostics import describe_streams, read_streams
+    from hoh_cosim.hardware.fse103 import FSE103Port
+    from hoh_cosim.hardware.ft150 import FT150Stream
+
+    if args.ft is None and args.probe is None:
+        raise ConfigError("hw sensors: give --ft HOST[:PORT], --probe DEVICE or both")
+    if not args.seconds > 0:
+        raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")
+    ft = FT150Stream(*args.ft) if args.ft else None
+    probe = (
+        FSE103Port(args.probe, framing=args.framing, byte_order=args.byte_order)
+        if args.probe
+        else None
+    )
+    figures = read_streams(ft, probe, args.seconds)
+    if args.json:
+        print(json.dumps(figures))
+    else:
+        names = {"ft": ft.describe() if ft else "", "probe": probe.describe() if probe else ""}
+        print(describe_streams(figures, names))
+    return 0
+
+
+def _hw_rehearse(args: argparse.Namespace) -> int:
+    from hoh_cosim.hardware.rehearsal import rehearse
+
+    if not args.seconds > 0:
+        raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")
+    log_path = Path(args.log) if args.log else Path("sessions") / f"rehearsal-{_stamp()}.mcap"
+    phantom = 0.03 if args.task in ("press", "scan") else None
+    result = rehearse(
+        args.seconds,
+        log_path,
+        task=args.task,
+        robot_rate_hz=args.rate,
+        faults=args.faults,
+        rebias_samples=args.rebias_samples,
+        phantom_below_m=phantom,
+        announce=_announce,
+    )
+    print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
+    return _report(result.session, log_path)
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from hoh_cosim.hardware.replay import plot_replay, replay
+
+    result = replay(args.log, args.overrides)
+    out = Path(args.out) if args.out else Path("runs") / f"replay-{Path(args.log).stem}"
+    out.mkdir(parents=True, exist_ok=True)
+    summary = result.summary()
+    (out / "replay.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    (out / "replay.png").write_bytes(plot_replay(result))
+    if not result.session.complete:
+        print(
+            f"note: {args.log} ends early (the session was cut off); replayed what is there",
+            file=sys.stderr,
+        )
+    for key, value in summary.items():
+        print(f"  {key:<28} {value:.6g}" if isinstance(value, float) else f"  {key:<28} {value}")
+    print(f"wrote {out}")
+    return 0
+
+
+def run_command(args: argparse.Namespace) -> int | None:
+    """Run a hardware command if `args` names one; None otherwise."""
+    if args.command == "replay":
+        return _replay(args)
+    if args.command != "hw":
+        return None
+    handlers = {
+        "run": _hw_run,
+        "calibrate": _hw_calibrate,
+        "sensors": _hw_sensors,
+        "rehearse": _hw_rehearse,
+    }
+    if args.hw_command not in handlers:
+        raise ConfigError("hw: expected a command: " + ", ".join(handlers))
+    try:
+        return handlers[args.hw_command](args)
+    except OSError as exc:
+        raise RunError(f"{exc.filename or 'I/O'}: {exc.strerror or exc}") from None

@@ -1,0 +1,152 @@
+"""A rehearsal: the real runner, real drivers and real session log against emulated devices.
+
+`plant_models.emulators` serves an FT-150 stream on loopback and an FSE103 on a pseudo-terminal from
+a world process that moves the simulated arm in real time; the runner connects to them exactly as to
+a rig. The calibration is the world's truth (the tool and the FT-150's offset), as a perfect
+`hoh-cosim hw calibrate` would find it; `rehearse(calibrate=True)` runs the real calibration first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hoh_cosim.control.controller import ControllerParams
+from hoh_cosim.control.estimator import EstimatorParams
+from hoh_cosim.control.gravity import GravityCalibration
+from hoh_cosim.hardware.config import (
+    FT150Config,
+    HardwareConfig,
+    ProbeConfig,
+    RebiasConfig,
+    RobotConfig,
+)
+from hoh_cosim.hardware.fse103 import FSE103Port
+from hoh_cosim.hardware.ft150 import FT150Stream
+from hoh_cosim.hardware.runner import Runner, SessionResult
+from hoh_cosim.hardware.session_log import SessionLog
+from plant_models.emulators import Fault, RehearsalWorld, WorldSetup
+
+__all__ = ["RehearsalResult", "rehearsal_config", "rehearse", "truth_calibration"]
+
+
+def truth_calibration(truth: dict) -> GravityCalibration:
+    """The calibration a perfect identification would give in the rehearsal world."""
+    bias = np.asarray(truth["bias"], dtype=float)
+    nan3 = np.full(3, np.nan)
+    return GravityCalibration(
+        mass_kg=float(truth["mass_kg"]),
+        com_m=np.asarray(truth["com_m"], dtype=float),
+        force_bias_N=bias[:3],
+        torque_bias_Nm=bias[3:],
+        mass_se_kg=0.0,
+        com_se_m=np.zeros(3),
+        force_bias_se_N=np.zeros(3),
+        torque_bias_se_Nm=np.zeros(3),
+        condition_number=np.nan,
+        n_poses=0,
+        gravity_B=np.asarray(truth["gravity_B"], dtype=float),
+        residual_rms_before=np.concatenate([nan3, nan3]),
+        residual_max_before=np.concatenate([nan3, nan3]),
+        residual_rms_after=np.concatenate([nan3, nan3]),
+        residual_max_after=np.concatenate([nan3, nan3]),
+    )
+
+
+def rehearsal_config(
+    world: RehearsalWorld,
+    log_dir: Path,
+    *,
+    rebias_samples: int = 500,
+    estimator: EstimatorParams | None = None,
+    controller: ControllerParams | None = None,
+    realtime_priority: int | None = None,
+) -> HardwareConfig:
+    setup = world.setup
+    return HardwareConfig(
+        path=Path("<rehearsal>"),
+        robot=RobotConfig(
+            host="rehearsal",
+            frequency_hz=setup.robot_rate_hz,
+            watchdog_hz=setup.watchdog_hz,
+            realtime_priority=realtime_priority,
+        ),
+        ft150=FT150Config(host="127.0.0.1", port=world.ft_port),
+        probe=ProbeConfig(device=world.pty_name),
+        calibration=None,
+        rebias=RebiasConfig(samples=rebias_samples),
+        estimator=estimator or EstimatorParams(),
+        controller=controller or ControllerParams(),
+        log_dir=log_dir,
+    )
+
+
+@dataclass
+class RehearsalResult:
+    session: SessionResult
+    log_path: Path
+    probe_framing: str | None
+    probe_byte_order: str | None
+
+
+def rehearse(
+    seconds: float,
+    log_path: Path,
+    *,
+    task: str = "circle",
+    robot_rate_hz: float = 500.0,
+    faults: Sequence[Fault] = (),
+    rebias_samples: int = 500,
+    task_start_s: float | None = None,
+    phantom_below_m: float | None = None,
+    controller: ControllerParams | None = None,
+    seed: int = 1,
+    realtime_priority: int | None = None,
+    announce: Callable[[str], None] = lambda message: None,
+) -> RehearsalResult:
+    """Start the world, run one session against it for `seconds`, stop everything."""
+    # the hand takes the handle once the rebias (rebias_samples at 200 Hz) is surely over
+    start = task_start_s if task_start_s is not None else 1.0 + rebias_samples / 200.0 + 1.0
+    setup = WorldSetup(
+        robot_rate_hz=robot_rate_hz,
+        task=task,
+        task_start_s=start,
+        phantom_below_m=phantom_below_m,
+        seed=seed,
+        faults=tuple(faults),
+    )
+    announce("starting the rehearsal world")
+    with RehearsalWorld(setup) as world:
+        config = rehearsal_config(
+            world,
+            log_path.parent,
+            rebias_samples=rebias_samples,
+            controller=controller,
+            realtime_priority=realtime_priority,
+        )
+        calibration = truth_calibration(world.truth)
+        ft = FT150Stream(config.ft150.host, config.ft150.port)
+        probe = FSE103Port(config.probe.device, reconnect=False)  # type: ignore[union-attr]
+        log = SessionLog(log_path, _metadata(config, setup)).start()
+        runner = Runner(config, world.robot(), ft, probe, calibration, log, announce=announce)
+        session = runner.run(seconds)
+    return RehearsalResult(session, log_path, probe.parser.framing, probe.parser.byte_order)
+
+
+def _metadata(config: HardwareConfig, setup: WorldSetup) -> dict:
+    return {
+        "kind": "rehearsal",
+        "robot": config.robot.host,
+        "period_s": 1.0 / setup.robot_rate_hz,
+        "R_TS": config.robot.R_TS.tolist(),
+        "world": {
+            field.name: getattr(setup, field.name)
+            if field.name != "faults"
+            else [(f.at_s, f.kind) for f in setup.faults]
+            for field in dataclasses.fields(setup)
+        },
+    }

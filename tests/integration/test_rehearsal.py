@@ -1,0 +1,202 @@
+"""The real runner, drivers and session log against emulated devices, with faults.
+
+Each session runs the world in a process of its own (`plant_models.emulators`): an FT-150 stream on
+loopback, an FSE103 on a pseudo-terminal and the UR5 behind shared memory, in real time. Every fault
+must end in a stopped robot, a message that names the cause and a complete log.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hoh_cosim.cli import main
+from hoh_cosim.control.sequencer import SequencerParams
+from hoh_cosim.hardware.calibrate import calibrate
+from hoh_cosim.hardware.diagnostics import read_streams
+from hoh_cosim.hardware.fse103 import FSE103Port
+from hoh_cosim.hardware.ft150 import FT150Stream
+from hoh_cosim.hardware.rehearsal import rehearsal_config, truth_calibration
+from hoh_cosim.hardware.robot import RobotState
+from hoh_cosim.hardware.runner import Runner, SessionResult
+from hoh_cosim.hardware.session_log import Session, SessionLog, read_session
+from plant_models.emulators import Fault, RehearsalWorld, WorldSetup
+
+FAULT_AT_S = 3.0  # world time; the runner's rebias (100 samples) ends by about 1.5 s
+
+
+@dataclass
+class Outcome:
+    result: SessionResult
+    after: RobotState  # the robot 0.3 s after the session ended
+    log: Session
+    ft: FT150Stream
+    probe: FSE103Port
+
+
+def run_session(tmp_path: Path, seconds: float, *faults: Fault, task: str = "circle") -> Outcome:
+    setup = WorldSetup(task=task, task_start_s=2.0, faults=faults)
+    with RehearsalWorld(setup) as world:
+        config = rehearsal_config(world, tmp_path, rebias_samples=100)
+        ft = FT150Stream("127.0.0.1", world.ft_port)
+        probe = FSE103Port(world.pty_name, reconnect=False)
+        log_path = tmp_path / "session.mcap"
+        log = SessionLog(log_path, {"R_TS": config.robot.R_TS.tolist()}).start()
+        robot = world.robot()
+        runner = Runner(config, robot, ft, probe, truth_calibration(world.truth), log)
+        result = runner.run(seconds)
+        time.sleep(0.3)
+        after = robot.state()
+    return Outcome(result, after, read_session(log_path), ft, probe)
+
+
+def assert_stopped_and_logged(outcome: Outcome, cause: str) -> None:
+    assert cause in outcome.result.cause
+    # stopped: the program on the robot was ended and the arm stands still
+    assert not outcome.after.program_running
+    assert np.linalg.norm(outcome.after.twist_B) < 1e-9
+    # a complete log that says why
+    assert outcome.log.complete
+    events = [m["event"] for m in outcome.log.messages["/events"]]
+    assert events[-1] == "end"
+    assert cause in outcome.log.messages["/events"][-1]["detail"]
+
+
+def test_a_clean_session_guides_the_robot_and_logs_every_cycle(tmp_path):
+    outcome = run_session(tmp_path, 5.0)
+    result = outcome.result
+    assert result.clean
+    assert result.cause == "5 s done"
+    assert result.cycles == 2500  # 500 Hz
+    assert outcome.result.rebias is not None
+    # the rebias found the FT-150's offset (the calibration's) within the noise
+    np.testing.assert_allclose(result.rebias.deviation[:3], 0.0, atol=0.1)
+    # the hand moved the robot: the circle started at 2 s
+    p = outcome.log.series("/robot", "p_BT_B")
+    assert np.ptp(p[:, 0]) > 0.01
+    assert len(outcome.log.messages["/command"]) == result.cycles
+    events = [m["event"] for m in outcome.log.messages["/events"]]
+    assert events == ["rebias", "parameters", "end"]
+    assert not outcome.after.program_running  # stopped at the end too
+    assert outcome.probe.parser.framing == "seed18"
+
+
+@pytest.mark.parametrize(
+    ("fault", "cause"),
+    [
+        ("probe_unplug", "FSE103 on /dev/pts/"),
+        ("ft_stall", "no new sample for 250 ms (the stream stalled)"),
+        ("ft_nan", "sent a non-finite value [nan, nan, nan, nan, nan, nan]"),
+        ("force_spike", "reached the 25 N stop"),
+        ("protective_stop", "the robot is in a protective stop"),
+    ],
+)
+def test_a_fault_stops_the_robot_with_a_message_and_a_complete_log(tmp_path, fault, cause):
+    outcome = run_session(tmp_path, 8.0, Fault(FAULT_AT_S, fault))
+    assert not outcome.result.clean
+    assert_stopped_and_logged(outcome, cause)
+    t_end = outcome.log.messages["/command"][-1]["t"]
+    assert t_end < 8.0  # it ended on the fault, not on time
+    if fault == "probe_unplug":
+        assert "connection lost" in outcome.result.cause
+
+
+@pytest.mark.parametrize("fault", ["ft_garbage", "probe_garbage"])
+def test_garbage_is_counted_and_the_session_goes_on(tmp_path, fault):
+    outcome = run_session(tmp_path, 5.0, Fault(FAULT_AT_S, fault))
+    assert outcome.result.clean
+    stream = outcome.ft if fault == "ft_garbage" else outcome.probe
+    assert stream.mailbox.stats.bad_frames >= 1
+    assert not outcome.after.program_running
+
+
+def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):
+    # the hand pushes from the start: the reading disagrees with the calibrated weight
+    setup = WorldSetup(task="push_release", task_start_s=0.0)
+    with RehearsalWorld(setup) as world:
+        config = rehearsal_config(world, tmp_path, rebias_samples=100)
+        robot = world.robot()
+        runner = Runner(
+            config,
+            robot,
+            FT150Stream("127.0.0.1", world.ft_port),
+            FSE103Port(world.pty_name, reconnect=False),
+            truth_calibration(world.truth),
+        )
+        result = runner.run(3.0)
+        after = robot.state()
+    assert not result.clean
+    assert result.cause.startswith("rebias refused")
+    assert result.cycles == 0
+    assert not after.program_running
+
+
+def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):
+    with RehearsalWorld(WorldSetup(task="off")) as world:
+        params = SequencerParams(
+            tilts=2,
+            tilt_min_deg=20.0,
+            tilt_max_deg=45.0,
+            directions=5,
+            settle_s=0.3,
+            max_angular_speed=1.0,
+            gain_orientation=4.0,
+        )
+        run = calibrate(
+            world.robot(),
+            FT150Stream("127.0.0.1", world.ft_port),
+            R_TS=rehearsal_config(world, tmp_path).robot.R_TS,
+            params=params,
+            samples=100,
+        )
+        after = world.robot().state()
+    truth = world.truth
+    assert run.calibration.n_poses == 10
+    assert run.samples == [100] * 10
+    assert run.calibration.mass_kg == pytest.approx(truth["mass_kg"], rel=0.02)
+    np.testing.assert_allclose(run.calibration.force_bias_N, truth["bias"][:3], atol=0.05)
+    assert not after.program_running  # stopped at the end
+
+
+def test_hw_sensors_describes_both_streams(tmp_path, capsys):
+    with RehearsalWorld(WorldSetup(task="off", probe_byte_order="big")) as world:
+        figures = read_streams(
+            FT150Stream("127.0.0.1", world.ft_port), FSE103Port(world.pty_name), 1.5
+        )
+        status = main(
+            [
+                "hw",
+                "sensors",
+                *("--ft", f"127.0.0.1:{world.ft_port}"),
+                *("--probe", world.pty_name, "--seconds", "1.0", "--json"),
+            ]
+        )
+    assert figures["ft"]["rate_hz"] == pytest.approx(200.0, rel=0.1)
+    assert figures["probe"]["rate_hz"] == pytest.approx(50.0, rel=0.1)
+    assert (figures["probe"]["framing"], figures["probe"]["byte_order"]) == ("seed18", "big")
+    # the FT-150's offset shows in the mean (the tool's weight on top of it)
+    assert len(figures["ft"]["mean"]) == 6
+    assert len(figures["probe"]["std"]) == 3
+    assert figures["ft"]["bad_frames"] == 0
+    assert status == 0
+    printed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(printed) == {"ft", "probe"}
+    assert printed["probe"]["framing"] == "seed18"
+    assert printed["ft"]["frames"] > 100
+
+
+def test_hw_rehearse_command_runs_a_session(tmp_path, capsys):
+    log = tmp_path / "r.mcap"
+    status = main(
+        ["hw", "rehearse", "--seconds", "3", "--rebias-samples", "100", "--log", str(log)]
+    )
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "session ended: 3 s done" in out
+    assert "FSE103 framing seed18, byte order little" in out
+    assert read_session(log).complete
