@@ -136,7 +136,10 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConf
     here = path.parent
 
     robot = _section(
-        w, raw, "robot", (
+        w,
+        raw,
+        "robot",
+        (
             "host",
             "frequency_hz",
             "watchdog_hz",
