@@ -40,7 +40,9 @@ class Outcome:
 
 
 def run_session(tmp_path: Path, seconds: float, *faults: Fault, task: str = "circle") -> Outcome:
-    setup = WorldSetup(task=task, task_start_s=2.0, faults=faults)
+    # the runner shares two cores with the emulators and the rest of the suite, and this VM has been
+    # seen to stall a process for 40 ms: a 200 ms watchdog, so that only a real hang trips it
+    setup = WorldSetup(task=task, task_start_s=2.0, faults=faults, watchdog_hz=5.0)
     with RehearsalWorld(setup) as world:
         config = rehearsal_config(world, tmp_path, rebias_samples=100)
         ft = FT150Stream("127.0.0.1", world.ft_port)
