@@ -34,7 +34,7 @@ from hoh_cosim.fmi.build import ensure_fmus, fmu_name
 from hoh_cosim.fmi.docs import fmus_readme
 from hoh_cosim.fmi.model_description import finish_model_description
 from hoh_cosim.fmi.slave import block_interface, port_element_names
-from hoh_cosim.params import leaves
+from hoh_cosim.params import leaves, with_values
 from plant_models.operator import Operator, OperatorParams
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -161,6 +161,23 @@ START_VALUES: dict[str, dict[str, Any]] = {
         **_port("p_BT_B", [0.4, -0.1, 0.3]),
     },
     "sequencer": {**_port("p_BT_B", [0.4, -0.1, 0.3]), **_port("R_BT", IDENTITY)},
+    "panda": _port("tau_cmd", [1.0, -0.5, 0.2, 0.4, 0.1, -0.1, 0.05]),
+    "impedance": {
+        "task.approach_start_s": 0.0,
+        "task.slide_start_s": 0.0,
+        **_port("qd", [0.01] * 7),
+        **_port("B", np.eye(7).reshape(49).tolist()),
+        **_port("J", np.eye(6, 7).reshape(42).tolist()),
+        **_port("p_BT_B", [0.3, 0.0, 0.4]),
+        **_port("R_BT", IDENTITY),
+    },
+    "ur5_impedance": {
+        "task.approach_start_s": 0.0,
+        **_port("p_BT_B", [0.4, -0.1, 0.3]),
+        **_port("R_BT", IDENTITY),
+        **_port("F_ext_B", [0.0, 0.0, 2.0]),
+        **_port("ready", [1.0]),
+    },
 }
 
 
@@ -168,7 +185,10 @@ def _in_process(kind: str, start_values: dict[str, Any], n_steps: int) -> np.nda
     """The block stepped in-process as fmpy steps the FMU: (n_steps + 1, outputs) rows, row 0 the
     outputs after initialisation (the block's initial outputs, or zeros)."""
     spec = KINDS[kind]
-    block: Any = make_block(spec.block, spec.params(), int(start_values.get("seed", 0)))
+    params = spec.params()
+    names = {leaf.name for leaf in leaves(params)}
+    params = with_values(params, {k: v for k, v in start_values.items() if k in names})
+    block: Any = make_block(spec.block, params, int(start_values.get("seed", 0)))
     inputs = {
         port.name: np.array(
             [float(start_values.get(n, 0.0)) for n in port_element_names(port.name, port.size)]

@@ -477,7 +477,7 @@ BAD_SCENARIOS = [
         "metrics",
         [
             "expected one of none, circles, static_noise, gravity_calibration, contact_scan, "
-            "release, got 'bogus'"
+            "release, teleecho, got 'bogus'"
         ],
         id="metrics-unknown-set",
     ),

@@ -41,6 +41,8 @@ SHORT = {
     "contact_scan": ["--duration", "10"],
     "contact_scan_fixture": ["--duration", "10"],
     "release": ["--duration", "7"],
+    "teleecho_slide": ["--duration", "8"],
+    "teleecho_slide_ur5": ["--duration", "8"],
 }
 
 METRICS = {
@@ -70,6 +72,13 @@ METRICS = {
         "max_bounce_m": float,
     },
     "release": {"release_drift_m": float, "release_settle_s": float},
+    "teleecho": {
+        "y_tracking_rms_m": float,
+        "contact_force_mean_N": float,
+        "contact_force_std_N": float,
+        "orientation_error_max_rad": float,
+        "contact_losses": int,
+    },
 }
 
 

@@ -7,8 +7,15 @@ from dataclasses import dataclass
 from hoh_cosim.control.block import make_block, takes_rng
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.impedance import (
+    CartesianImpedance,
+    ImpedanceParams,
+    PositionImpedance,
+    PositionImpedanceParams,
+)
 from hoh_cosim.control.sequencer import PoseSequencer, SequencerParams
 from plant_models.operator import Operator, OperatorParams
+from plant_models.panda import PandaParams, PandaPlant
 from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Params, FT150Sensor
 
@@ -76,6 +83,27 @@ KINDS: dict[str, ComponentKind] = {
             SequencerParams,
             "hoh_sequencer",
             "the gravity-calibration drive through static poses",
+        ),
+        ComponentKind(
+            "panda",
+            PandaPlant,
+            PandaParams,
+            "hoh_panda",
+            "torque-controlled Franka Panda, probe and phantom (seed 001)",
+        ),
+        ComponentKind(
+            "impedance",
+            CartesianImpedance,
+            ImpedanceParams,
+            "hoh_impedance",
+            "Cartesian impedance for a torque-controlled arm (seed 001, eq. 3-15)",
+        ),
+        ComponentKind(
+            "ur5_impedance",
+            PositionImpedance,
+            PositionImpedanceParams,
+            "hoh_ur5_impedance",
+            "position-based impedance for the speedL-commanded UR5",
         ),
     )
 }

@@ -211,6 +211,64 @@ def _release(scenario: Scenario, rec: Recording, report: Report) -> dict[str, by
     return {"release.png": _png(fig)}
 
 
+def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    """Seed 001's Fig. 13: pose error and its norms, joint torques (the UR5: its speedL command),
+    and the contact force."""
+    plant = scenario.component_of_kind("panda") or scenario.component_of_kind("plant")
+    ctl = scenario.component_of_kind("impedance") or scenario.component_of_kind("ur5_impedance")
+    error, norm = _get(rec, ctl, "pose_error"), _get(rec, ctl, "pose_error_norm")
+    contact, depth = _get(rec, plant, "F_contact_B"), _get(rec, plant, "penetration")
+    if error is None or norm is None or contact is None or depth is None:
+        return {}
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, 2, sharex=True, figsize=(11, 7))
+    t = rec.time
+    axes[0, 0].plot(t, 1e3 * error[:, :3], lw=1)
+    axes[0, 0].set_ylabel("position error [mm]")
+    axes[0, 0].legend(["x", "y", "z"], fontsize=8, loc="upper right")
+    axes[1, 0].plot(t, np.degrees(error[:, 3:]), lw=1)
+    axes[1, 0].set_ylabel("orientation error [°]")
+    axes[1, 0].legend(["roll", "pitch", "yaw"], fontsize=8, loc="upper right")
+    axes[0, 1].plot(t, 1e3 * norm[:, 0], lw=1, label="‖position‖ [mm]")
+    axes[0, 1].plot(t, np.degrees(norm[:, 1]), lw=1, label="‖orientation‖ [°]")
+    axes[0, 1].set_ylabel("pose error norms")
+    axes[0, 1].legend(fontsize=8, loc="upper right")
+    normal = contact @ plant.params.phantom.plane_normal_B
+    axes[1, 1].plot(t, normal, lw=1, label="normal force [N]")
+    axes[1, 1].plot(t, 1e3 * depth[:, 0], lw=1, label="penetration [mm]")
+    axes[1, 1].axhline(0.0, color="k", lw=0.5)
+    axes[1, 1].legend(fontsize=8, loc="upper right")
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    axes[0, 0].set_title(
+        f"y tracking RMS {_fmt(report.metrics.get('y_tracking_rms_m'), 1e3, 'mm')}, "
+        f"max orientation error {_fmt(report.metrics.get('orientation_error_max_rad'), 57.29578, '°')}"
+    )
+    axes[1, 1].set_title(
+        f"contact {_fmt(report.metrics.get('contact_force_mean_N'), 1, 'N')} "
+        f"± {_fmt(report.metrics.get('contact_force_std_N'), 1, 'N')}, "
+        f"{report.metrics.get('contact_losses')} losses"
+    )
+    fig.tight_layout()
+    images = {"pose_error.png": _png(fig)}
+
+    torques = _get(rec, plant, "tau_J")
+    command = _get(rec, ctl, "twist_B")
+    fig, ax = plt.subplots(figsize=(8, 4))
+    if torques is not None:
+        ax.plot(t, torques, lw=0.8)
+        ax.set_ylabel("joint torque [N·m]")
+        ax.legend([f"τ{i + 1}" for i in range(torques.shape[1])], fontsize=7, ncol=4)
+    elif command is not None:
+        ax.plot(t, 1e3 * command[:, :3], lw=0.8)
+        ax.set_ylabel("speedL command [mm/s]")
+        ax.legend(["x", "y", "z"], fontsize=8)
+    ax.set_xlabel("time [s]")
+    fig.tight_layout()
+    images["torques.png" if torques is not None else "command.png"] = _png(fig)
+    return images
+
+
 def _fmt(value: float | None, scale: float, unit: str) -> str:
     return "n/a" if value is None else f"{scale * value:.3g} {unit}"
 
@@ -221,6 +279,7 @@ _PLOTS: dict[str, Callable[[Scenario, Recording, Report], dict[str, bytes]]] = {
     "gravity_calibration": _gravity_calibration,
     "contact_scan": _contact_scan,
     "release": _release,
+    "teleecho": _teleecho,
 }
 
 

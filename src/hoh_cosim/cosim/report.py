@@ -28,6 +28,12 @@ parameters (the truth the simulation knows); none is a constant. A metric that t
   rose above the surface after it.
 - release (5.C): `release_drift_m` how far the tip moved after the hand let go (to the end of the
   run), `release_settle_s` how long until its speed stayed under 1 mm/s.
+- teleecho (seed 001, 6.2), the probe pressing and sliding on the phantom, for the Panda under
+  Cartesian impedance or the UR5 under position-based impedance: over the slide (from its start to
+  the end) `y_tracking_rms_m` RMS of the tip's distance from the reference along the slide's axis,
+  `contact_force_mean_N` and `contact_force_std_N` of the phantom's force along the surface normal;
+  from the start of the run, `orientation_error_max_rad` the largest angle between the tip's
+  orientation and its start orientation (the reference); from the first touch, `contact_losses`.
 - with a controller: `controller_flags`, what its limits did once the estimator was ready ("ok" if
   nothing), and `controller_stop_s`, how long it commanded a stop then.
 - every run: `realtime_factor` (simulated / wall-clock seconds) and `wall_s`.
@@ -283,6 +289,45 @@ def _release(scenario: Scenario, rec: Recording, report: Report) -> None:
         m["release_settle_s"] = float(rec.time[k + moving[-1] + 1] - rec.time[k])
 
 
+def _teleecho_parts(scenario: Scenario) -> tuple[ComponentSpec, ComponentSpec]:
+    plant = scenario.component_of_kind("panda") or scenario.component_of_kind("plant")
+    ctl = scenario.component_of_kind("impedance") or scenario.component_of_kind("ur5_impedance")
+    assert plant is not None, "the scenario loader checks that a plant exists"
+    assert ctl is not None, "the scenario loader checks that a controller exists"
+    return plant, ctl
+
+
+def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> None:
+    plant, ctl = _teleecho_parts(scenario)
+    task = ctl.params.task
+    m = report.metrics
+    p = _signal(rec, plant, "p_BT_B")
+    R = _signal(rec, plant, "R_BT").reshape(-1, 3, 3)
+    relative = np.einsum("ji,njk->nik", R[0], R)  # R_0ᵀ R(t)
+    cos = np.clip((np.trace(relative, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    m["orientation_error_max_rad"] = float(np.max(np.arccos(cos)))
+    depth = _signal(rec, plant, "penetration")[:, 0]
+    touching = depth > 0.0
+    if touching.any():
+        after = touching[int(np.argmax(touching)) :]
+        m["contact_losses"] = int(np.count_nonzero(after[:-1] & ~after[1:]))
+    else:
+        report.notes.append("teleecho: the probe never touched the phantom")
+        m["contact_losses"] = 0
+    # the reference at each row's time, from the task and the start, as the controller has it
+    sliding = rec.time >= task.slide_start_s
+    if not sliding.any():
+        report.notes.append("teleecho: the run ends before the slide starts")
+        m["y_tracking_rms_m"] = m["contact_force_mean_N"] = m["contact_force_std_N"] = None
+        return
+    ref = np.array([task.reference(float(t), p[0])[0] for t in rec.time[sliding]])
+    along = (p[sliding] - ref) @ task.axis_B
+    m["y_tracking_rms_m"] = float(np.sqrt(np.mean(along**2)))
+    normal = _signal(rec, plant, "F_contact_B")[sliding] @ plant.params.phantom.plane_normal_B
+    m["contact_force_mean_N"] = float(np.mean(normal))
+    m["contact_force_std_N"] = float(np.std(normal))
+
+
 def _controller_status(scenario: Scenario, rec: Recording, report: Report) -> None:
     """Which safety flags the controller raised once the estimator was ready: a person reading the
     metrics should know when a run's motion was clamped or stopped."""
@@ -311,6 +356,7 @@ _SETS: dict[str, Callable[[Scenario, Recording, Report], None]] = {
     "gravity_calibration": _gravity_calibration,
     "contact_scan": _contact_scan,
     "release": _release,
+    "teleecho": _teleecho,
 }
 
 

@@ -56,15 +56,17 @@ __all__ = [
     "parse_endpoint",
 ]
 
-METRIC_SETS: dict[str, tuple[str, ...]] = {
+METRIC_SETS: dict[str, tuple[str | tuple[str, ...], ...]] = {
     "none": (),
     "circles": ("operator", "plant", "estimator"),
     "static_noise": ("estimator",),
     "gravity_calibration": ("sequencer", "plant", "ft150"),
     "contact_scan": ("operator", "plant"),
     "release": ("operator", "plant"),
+    "teleecho": (("panda", "plant"), ("impedance", "ur5_impedance")),
 }
-"""Each metric set (see `hoh_cosim.cosim.report`) and the kinds of component it reads."""
+"""Each metric set (see `hoh_cosim.cosim.report`) and the kinds of component it reads (a tuple:
+any one of those kinds)."""
 _TOP_KEYS = (
     "extends",
     "name",
@@ -278,10 +280,12 @@ def load_scenario(
     components = {n: _component(n, c, scenario_seed, w) for n, c in raw_components.items()}
     kinds = {c.kind.name for c in components.values()}
     for needed in METRIC_SETS[metrics]:
-        if needed not in kinds:
+        alternatives = (needed,) if isinstance(needed, str) else needed
+        if not kinds.intersection(alternatives):
+            wanted = " or ".join(repr(k) for k in alternatives)
             raise w.error(
                 "metrics",
-                f"the {metrics} metrics need a component of kind {needed!r}; there is none",
+                f"the {metrics} metrics need a component of kind {wanted}; there is none",
             )
 
     for text in overrides:

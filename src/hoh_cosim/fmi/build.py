@@ -79,7 +79,8 @@ def default_cache_dir() -> Path:
 
 def fmu_name(kind: str) -> str:
     """The FMU's model identifier: the entry script's class name, e.g. HohEstimator."""
-    return "Hoh" + {"ft150": "FT150", "fse103": "FSE103"}.get(kind, kind.capitalize())
+    special = {"ft150": "FT150", "fse103": "FSE103"}
+    return "Hoh" + special.get(kind, "".join(part.capitalize() for part in kind.split("_")))
 
 
 def _fingerprint(script: Path) -> str:
