@@ -188,11 +188,9 @@ class PandaParams:
         )
         if not isinstance(self.substeps, int) or self.substeps < 1:
             raise ConfigError(f"substeps: expected an integer >= 1, got {self.substeps!r}")
-        outside = [
-            i + 1 for i, q in enumerate(self.q0) if not Q_MIN[i] <= q <= Q_MAX[i]
-        ]  # fmt: skip
+        outside = [j for j, q in enumerate(self.q0) if not Q_MIN[j] <= q <= Q_MAX[j]]
         if outside:
-            j = outside[0] - 1
+            j = outside[0]
             raise ConfigError(
                 f"q0: joint {j + 1} at {self.q0[j]:.4g} rad is outside [{Q_MIN[j]}, {Q_MAX[j]}]"
             )
