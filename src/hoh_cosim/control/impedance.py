@@ -39,8 +39,16 @@ import numpy as np
 
 from hoh_cosim.control.block import Port
 from hoh_cosim.control.frames import matrix_to_rotvec
-from hoh_cosim.control.vectors import Rot3, Vec, Vec3, as_scalar, as_unit_vector, as_vector, frozen
-from hoh_cosim.errors import ConfigError
+from hoh_cosim.control.vectors import (
+    Rot3,
+    Vec,
+    Vec3,
+    as_nonnegative_vector,
+    as_positive_vector,
+    as_scalar,
+    as_unit_vector,
+    frozen,
+)
 
 __all__ = [
     "CartesianImpedance",
@@ -119,15 +127,6 @@ def rpy_rate_matrix(rpy: Vec3) -> np.ndarray:
     return np.array([[cp * ct, -sp, 0.0], [sp * ct, cp, 0.0], [-st, 0.0, 1.0]])
 
 
-def _gains(values: Any, size: int, name: str, positive: bool = False) -> Vec:
-    v = as_vector(values, size, name)
-    if np.any(v <= 0.0) if positive else np.any(v < 0.0):
-        raise ConfigError(
-            f"{name}: expected values {'>' if positive else '>='} 0, got {v.tolist()}"
-        )
-    return v
-
-
 @dataclass(frozen=True)
 class ImpedanceParams:
     UNITS: ClassVar[dict[str, Any]] = {
@@ -146,8 +145,8 @@ class ImpedanceParams:
     task: SlideTask = field(default_factory=SlideTask)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "K", _gains(self.K, 6, "K"))
-        object.__setattr__(self, "D", _gains(self.D, 6, "D"))
+        object.__setattr__(self, "K", as_nonnegative_vector(self.K, 6, "K"))
+        object.__setattr__(self, "D", as_nonnegative_vector(self.D, 6, "D"))
         object.__setattr__(
             self, "null_damping", as_scalar(self.null_damping, "null_damping", low=0.0)
         )
@@ -266,8 +265,9 @@ class PositionImpedanceParams:
     task: SlideTask = field(default_factory=SlideTask)
 
     def __post_init__(self) -> None:
-        for name in ("M", "K", "D"):
-            object.__setattr__(self, name, _gains(getattr(self, name), 3, name, name == "M"))
+        object.__setattr__(self, "M", as_positive_vector(self.M, 3, "M"))
+        object.__setattr__(self, "K", as_nonnegative_vector(self.K, 3, "K"))
+        object.__setattr__(self, "D", as_nonnegative_vector(self.D, 3, "D"))
         for name in ("tracking_gain", "orientation_gain", "max_speed"):
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
