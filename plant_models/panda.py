@@ -247,7 +247,7 @@ class PandaPlant:
     def reset(self) -> None:
         self.q = self.params.q0.copy()
         self.qd = self.params.qd0.copy()
-        self._tau_J = np.zeros(7)
+        self._tau_cmd = np.zeros(7)  # the last command, clamped
         self._outputs = self._evaluate()
 
     def retune(self, params: PandaParams) -> None:
@@ -289,9 +289,7 @@ class PandaPlant:
             qdd = pin.aba(m, d, self.q, self.qd, tau)
             self.qd = self.qd + h * qdd
             self.q = self.q + h * self.qd
-        self._tau_J = tau_cmd + (
-            pin.computeGeneralizedGravity(m, d, self.q) if p.gravity_compensation else 0.0
-        )
+        self._tau_cmd = tau_cmd
         self._outputs = self._evaluate()
         return self._outputs
 
@@ -304,12 +302,14 @@ class PandaPlant:
         J = pin.computeFrameJacobian(m, d, q, self.tcp, pin.LOCAL_WORLD_ALIGNED)
         B = pin.crba(m, d, q)
         B = np.triu(B) + np.triu(B, 1).T  # crba fills the upper triangle
-        coriolis = pin.nonLinearEffects(m, d, q, qd) - pin.computeGeneralizedGravity(m, d, q)
+        gravity = pin.computeGeneralizedGravity(m, d, q)
+        coriolis = pin.nonLinearEffects(m, d, q, qd) - gravity
+        tau_J = self._tau_cmd + gravity if self.params.gravity_compensation else self._tau_cmd
         friction = friction_torque(qd) if self.params.friction else np.zeros(7)
         return {
             "q": q.copy(),
             "qd": qd.copy(),
-            "tau_J": self._tau_J.copy(),
+            "tau_J": tau_J.copy(),
             "p_BT_B": H[:3, 3].copy(),
             "R_BT": H[:3, :3].reshape(9).copy(),
             "twist_B": twist,
