@@ -51,11 +51,13 @@ METRICS = {
         "hand_force_rms_N": float,
         "filter_lag_ms": float,
         "estimate_rms_error_N": float,
+        "velocity_hf_rms_m_s": float,
     },
     "static_noise": {
         "noise_max_abs_raw_N": list,
         "noise_max_abs_filtered_N": list,
         "noise_attenuation": list,
+        "rest_motion_m": float,
     },
     "gravity_calibration": {
         "mass_kg": float,

@@ -16,12 +16,12 @@ from hoh_cosim.cosim.engines import Recording
 from hoh_cosim.cosim.report import Report
 from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 
-__all__ = ["render_plots"]
+__all__ = ["gravity_residual_figure", "png", "pyplot", "render_plots"]
 
 AXES = ("x", "y", "z")
 
 
-def _pyplot():
+def pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,10 +30,10 @@ def _pyplot():
     return plt
 
 
-def _png(fig) -> bytes:
+def png(fig) -> bytes:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=110)
-    _pyplot().close(fig)
+    pyplot().close(fig)
     return buffer.getvalue()
 
 
@@ -44,7 +44,7 @@ def _get(rec: Recording, spec: ComponentSpec | None, port: str) -> np.ndarray | 
 
 
 def _circles(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
-    plt = _pyplot()
+    plt = pyplot()
     op = scenario.component_of_kind("operator")
     plant = scenario.component_of_kind("plant")
     est = scenario.component_of_kind("estimator")
@@ -62,7 +62,7 @@ def _circles(scenario: Scenario, rec: Recording, report: Report) -> dict[str, by
         ax.set_title(f"path, RMS error {_fmt(report.metrics.get('path_rms_error_m'), 1e3, 'mm')}")
         ax.legend(loc="best")
         fig.tight_layout()
-        out["path.png"] = _png(fig)
+        out["path.png"] = png(fig)
     hand, raw, filt = (
         _get(rec, op, "F_hand_B"),
         _get(rec, est, "F_hand_meas_B"),
@@ -85,7 +85,7 @@ def _circles(scenario: Scenario, rec: Recording, report: Report) -> dict[str, by
             f"hand force in B; filter lag {_fmt(report.metrics.get('filter_lag_ms'), 1, 'ms')}"
         )
         fig.tight_layout()
-        out["hand_force.png"] = _png(fig)
+        out["hand_force.png"] = png(fig)
     out.update(_command(scenario, rec))
     return out
 
@@ -96,7 +96,7 @@ def _command(scenario: Scenario, rec: Recording) -> dict[str, bytes]:
     command, actual = _get(rec, ctl, "twist_B"), _get(rec, plant, "twist_B")
     if command is None or actual is None:
         return {}
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6))
     for k, ax in enumerate(axes):
         ax.plot(rec.time, 1e3 * command[:, k], lw=0.8, label="commanded")
@@ -106,7 +106,7 @@ def _command(scenario: Scenario, rec: Recording) -> dict[str, bytes]:
     axes[0].legend(loc="upper right", fontsize=8)
     axes[0].set_title("tip velocity in B")
     fig.tight_layout()
-    return {"velocity.png": _png(fig)}
+    return {"velocity.png": png(fig)}
 
 
 def _static_noise(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
@@ -114,7 +114,7 @@ def _static_noise(scenario: Scenario, rec: Recording, report: Report) -> dict[st
     raw, filt = _get(rec, est, "F_hand_meas_B"), _get(rec, est, "F_hand_B")
     if raw is None or filt is None:
         return {}
-    plt = _pyplot()
+    plt = pyplot()
     ready = rec[f"{est.name}.ready"][:, 0] > 0.5
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
     raw_max = report.metrics.get("noise_max_abs_raw_N") or [math.nan] * 3
@@ -127,20 +127,27 @@ def _static_noise(scenario: Scenario, rec: Recording, report: Report) -> dict[st
     axes[-1].set_xlabel("time [s]")
     axes[0].set_title("hand force estimate with nobody touching (seed Fig. 18)")
     fig.tight_layout()
-    return {"noise.png": _png(fig)}
+    return {"noise.png": png(fig)}
 
 
 def _gravity_calibration(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
-    from hoh_cosim.control.gravity import GravityModel
-
     cal = report.data.get("calibration")
     if cal is None:
         return {}
     R_BS, wrench = report.data["poses"]
-    model = GravityModel(cal.tool, scenario.component_of_kind("plant").params.g_B)
+    g_B = scenario.component_of_kind("plant").params.g_B
+    return {"gravity_residuals.png": png(gravity_residual_figure(cal, R_BS, wrench, g_B))}
+
+
+def gravity_residual_figure(cal, R_BS: np.ndarray, wrench: np.ndarray, g_B: np.ndarray, note=""):
+    """Seed Fig. 16: per pose, each wrench axis with the bias removed and with the weight model
+    removed too."""
+    from hoh_cosim.control.gravity import GravityModel
+
+    model = GravityModel(cal.tool, g_B)
     before = wrench - cal.bias
     after = before - np.array([model.weight_S(R) for R in R_BS])
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 3, sharex=True, figsize=(11, 6))
     labels = ("F_x [N]", "F_y [N]", "F_z [N]", "τ_x [N·m]", "τ_y [N·m]", "τ_z [N·m]")
     pose = np.arange(1, len(R_BS) + 1)
@@ -152,11 +159,11 @@ def _gravity_calibration(scenario: Scenario, rec: Recording, report: Report) -> 
         ax.set_xlabel("pose")
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(
-        f"gravity compensation per pose (seed Fig. 16): m = {cal.mass_kg:.4f} kg, "
+        f"gravity compensation per pose (seed Fig. 16){note}: m = {cal.mass_kg:.4f} kg, "
         f"p_SC = {np.round(1e3 * cal.com_m, 2).tolist()} mm"
     )
     fig.tight_layout()
-    return {"gravity_residuals.png": _png(fig)}
+    return fig
 
 
 def _contact_scan(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
@@ -167,7 +174,7 @@ def _contact_scan(scenario: Scenario, rec: Recording, report: Report) -> dict[st
     if contact is None or depth is None or hand is None:
         return {}
     d = op.params.press_direction_B
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
     axes[0].plot(rec.time, -contact @ d, lw=1, label="phantom on the probe")
     axes[0].plot(rec.time, hand @ d, lw=1, label="hand, along the press")
@@ -184,7 +191,7 @@ def _contact_scan(scenario: Scenario, rec: Recording, report: Report) -> dict[st
     axes[1].set_ylabel("penetration [mm]")
     axes[1].set_xlabel("time [s]")
     fig.tight_layout()
-    return {"contact.png": _png(fig), **_command(scenario, rec)}
+    return {"contact.png": png(fig), **_command(scenario, rec)}
 
 
 def _release(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
@@ -193,7 +200,7 @@ def _release(scenario: Scenario, rec: Recording, report: Report) -> dict[str, by
     p, v, hand = _get(rec, plant, "p_BT_B"), _get(rec, plant, "twist_B"), _get(rec, op, "F_hand_B")
     if p is None or v is None or hand is None:
         return {}
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
     axes[0].plot(rec.time, hand, lw=1)
     axes[0].set_ylabel("hand force [N]")
@@ -208,7 +215,7 @@ def _release(scenario: Scenario, rec: Recording, report: Report) -> dict[str, by
         f"settles in {_fmt(report.metrics.get('release_settle_s'), 1, 's')}"
     )
     fig.tight_layout()
-    return {"release.png": _png(fig)}
+    return {"release.png": png(fig)}
 
 
 def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
@@ -220,7 +227,7 @@ def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> dict[str, b
     contact, depth = _get(rec, plant, "F_contact_B"), _get(rec, plant, "penetration")
     if error is None or norm is None or contact is None or depth is None:
         return {}
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 2, sharex=True, figsize=(11, 7))
     t = rec.time
     axes[0, 0].plot(t, 1e3 * error[:, :3], lw=1)
@@ -250,7 +257,7 @@ def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> dict[str, b
         f"{report.metrics.get('contact_losses')} losses"
     )
     fig.tight_layout()
-    images = {"pose_error.png": _png(fig)}
+    images = {"pose_error.png": png(fig)}
 
     torques = _get(rec, plant, "tau_J")
     command = _get(rec, ctl, "twist_B")
@@ -265,7 +272,7 @@ def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> dict[str, b
         ax.legend(["x", "y", "z"], fontsize=8)
     ax.set_xlabel("time [s]")
     fig.tight_layout()
-    images["torques.png" if torques is not None else "command.png"] = _png(fig)
+    images["torques.png" if torques is not None else "command.png"] = png(fig)
     return images
 
 

@@ -9,13 +9,16 @@ parameters (the truth the simulation knows); none is a constant. A metric that t
   `path_rms_error_m` RMS distance of the tip from where the hand wants it; `hand_force_rms_N` RMS
   magnitude of the true hand force; `filter_lag_ms` how far the filtered hand force trails the raw,
   aligned measurement at the circle's frequency (the seed's "lag added by the filter", ~10 ms);
-  `estimate_rms_error_N` RMS magnitude of filtered estimate minus true hand force. Also
+  `estimate_rms_error_N` RMS magnitude of filtered estimate minus true hand force;
+  `velocity_hf_rms_m_s` RMS of the tip's velocity above 4x the circle frequency (zero-phase
+  high-pass): the jitter and the oscillation a loop near its stability limit adds. Also
   `estimate_lag_ms`: the filtered estimate behind the true force (sensor latency, packets, filter).
   A negative lag is a lead: the constant-acceleration filter extrapolates between packets, and the
   held raw reading is itself half a packet period late on average.
 - static_noise (Fig. 18, 19), once the estimator is ready: `noise_max_abs_raw_N` and
   `noise_max_abs_filtered_N` max |hand force estimate - true hand force| per base axis x, y, z, raw
-  (aligned, compensated, held packets) and filtered; `noise_attenuation` their ratio.
+  (aligned, compensated, held packets) and filtered; `noise_attenuation` their ratio;
+  `rest_motion_m` how far the untouched tip moved in that window (noise that got past the deadband).
 - gravity_calibration (Fig. 16, 17): every FT-150 packet delivered while the robot holds a pose is
   averaged; the 10-parameter identification of eq. 4-8 runs on the averages (as `hoh-cosim
   identify-gravity` would on the `poses.csv` written beside). `mass_kg`, `com_m` (x, y, z in S),
@@ -103,6 +106,18 @@ def lag_in_window(
     return float(np.average(lags, weights=weights)) if sum(weights) > 0 else math.nan
 
 
+HF_FACTOR = 4.0
+"""The jitter band of a circle run starts at this many times the circle's frequency."""
+
+
+def high_passed(x: np.ndarray, cutoff_hz: float, dt: float) -> np.ndarray:
+    """`x` (n, k) through a 4th-order Butterworth high-pass, forwards and backwards (no phase)."""
+    from scipy import signal
+
+    sos = signal.butter(4, cutoff_hz, "highpass", fs=1.0 / dt, output="sos")
+    return signal.sosfiltfilt(sos, x, axis=0)
+
+
 def _circles(scenario: Scenario, rec: Recording, report: Report) -> None:
     op, plant, est = (_component(scenario, k) for k in ("operator", "plant", "estimator"))
     p = op.params
@@ -123,6 +138,7 @@ def _circles(scenario: Scenario, rec: Recording, report: Report) -> None:
                     "filter_lag_ms",
                     "estimate_lag_ms",
                     "estimate_rms_error_N",
+                    "velocity_hf_rms_m_s",
                 )
             )
         )
@@ -140,6 +156,11 @@ def _circles(scenario: Scenario, rec: Recording, report: Report) -> None:
     m["filter_lag_ms"] = 1e3 * lag_in_window(t, raw[:, axes], estimate[:, axes], frequency)
     m["estimate_lag_ms"] = 1e3 * lag_in_window(t, hand[:, axes], estimate[:, axes], frequency)
     m["estimate_rms_error_N"] = _rms_norm(estimate - hand)
+    m["velocity_hf_rms_m_s"] = _rms_norm(
+        high_passed(
+            _signal(rec, plant, "twist_B")[window, :3], HF_FACTOR * frequency, scenario.dt_s
+        )
+    )
 
 
 def _ready_window(rec: Recording, est: ComponentSpec, report: Report, what: str) -> np.ndarray:
@@ -156,7 +177,12 @@ def _static_noise(scenario: Scenario, rec: Recording, report: Report) -> None:
     op = scenario.component_of_kind("operator")
     window = _ready_window(rec, est, report, "static_noise")
     m = report.metrics
-    names = ("noise_max_abs_raw_N", "noise_max_abs_filtered_N", "noise_attenuation")
+    names = (
+        "noise_max_abs_raw_N",
+        "noise_max_abs_filtered_N",
+        "noise_attenuation",
+        "rest_motion_m",
+    )
     if window.sum() < 2:
         report.notes.append("static_noise: less than a second after the rebias: no noise metrics")
         m.update(dict.fromkeys(names))
@@ -168,6 +194,12 @@ def _static_noise(scenario: Scenario, rec: Recording, report: Report) -> None:
     m[names[1]] = filtered.tolist()
     with np.errstate(divide="ignore", invalid="ignore"):
         m[names[2]] = [float(x) if math.isfinite(x) else None for x in raw / filtered]
+    plant = scenario.component_of_kind("plant")
+    if plant is None:
+        m[names[3]] = None
+    else:
+        tip = _signal(rec, plant, "p_BT_B")[window]
+        m[names[3]] = float(np.max(np.linalg.norm(tip - tip[0], axis=1)))
 
 
 def pose_averages(

@@ -18,7 +18,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,7 +31,15 @@ from hoh_cosim.cosim.report import Report, compute_report
 from hoh_cosim.cosim.scenario import Scenario, load_scenario
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["RunResult", "check_out_dir", "run_scenario", "summary_of", "write_results"]
+__all__ = [
+    "RunResult",
+    "check_out_dir",
+    "jsonable",
+    "replace_dir",
+    "run_scenario",
+    "summary_of",
+    "write_results",
+]
 
 
 @dataclass
@@ -43,23 +51,24 @@ class RunResult:
     summary: dict[str, Any]
 
 
-def check_out_dir(out: Path) -> None:
-    """Refuse, before anything runs, a destination that a run must not replace."""
+def check_out_dir(out: Path, marker: str = "summary.json", what: str = "run") -> None:
+    """Refuse, before anything runs, a destination that a result must not replace: one that is not
+    a directory, or a non-empty directory without `marker` (so not an earlier result)."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not (out / "summary.json").is_file():
+    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
         raise ConfigError(
-            f"--out {out}: exists, is not empty and holds no summary.json, so it is not a "
-            "hoh-cosim run directory; choose another"
+            f"--out {out}: exists, is not empty and holds no {marker}, so it is not a "
+            f"hoh-cosim {what} directory; choose another"
         )
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
     """Plain JSON: non-finite floats become null (JSON has no NaN)."""
     if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
+        return {k: jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, np.generic):
         value = value.item()
     if isinstance(value, float) and not math.isfinite(value):
@@ -70,7 +79,7 @@ def _jsonable(value: Any) -> Any:
 def summary_of(
     scenario: Scenario, rec: Recording, report: Report, overrides: Sequence[str]
 ) -> dict:
-    return _jsonable(
+    return jsonable(
         {
             "scenario": scenario.name,
             "file": str(scenario.path),
@@ -102,29 +111,16 @@ def _signals_csv(path: Path, scenario: Scenario, rec: Recording) -> None:
         np.savetxt(f, data, fmt="%.10g", delimiter=",")
 
 
-def write_results(
-    out: Path,
-    scenario: Scenario,
-    rec: Recording,
-    report: Report,
-    summary: dict,
-    plots: dict[str, bytes],
-) -> None:
-    """Assemble the results beside `out`, then move them into place in one rename."""
+def replace_dir(out: Path, fill: Callable[[Path], None]) -> None:
+    """Call `fill(staging)` on an empty directory beside `out`, then move it into place in one
+    rename: a failure leaves no half-written result, and an earlier one at `out` is replaced whole
+    (or put back if the move fails)."""
     out = out.absolute()
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     old: Path | None = None
     try:
-        _signals_csv(staging / "signals.csv", scenario, rec)
-        for name, text in report.files.items():
-            (staging / name).write_text(text, encoding="utf-8")
-        for name, png in plots.items():
-            (staging / name).write_bytes(png)
-        # the summary last: its presence says the directory is complete
-        (staging / "summary.json").write_text(
-            json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8"
-        )
+        fill(staging)
         os.chmod(staging, 0o755)
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
@@ -138,6 +134,30 @@ def write_results(
     finally:
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+
+
+def write_results(
+    out: Path,
+    scenario: Scenario,
+    rec: Recording,
+    report: Report,
+    summary: dict,
+    plots: dict[str, bytes],
+) -> None:
+    """Write a run's files into `out` through `replace_dir`; summary.json last, since its presence
+    says the directory is complete."""
+
+    def fill(staging: Path) -> None:
+        _signals_csv(staging / "signals.csv", scenario, rec)
+        for name, text in report.files.items():
+            (staging / name).write_text(text, encoding="utf-8")
+        for name, png in plots.items():
+            (staging / name).write_bytes(png)
+        (staging / "summary.json").write_text(
+            json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8"
+        )
+
+    replace_dir(out, fill)
 
 
 def run_scenario(
