@@ -6,6 +6,7 @@
     hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
     hoh-cosim hw run|calibrate|sensors|rehearse ...   (see hoh_cosim.hardware.commands)
     hoh-cosim replay LOG.mcap [--set ...] [--out DIR]
+    hoh-cosim sweep|report|tune ...   (see hoh_cosim.study.commands)
 
 Exit status: 0 done; 2 the input is wrong (one line naming the file and the place); 1 the run failed.
 """
@@ -23,12 +24,14 @@ from hoh_cosim import __version__
 from hoh_cosim.errors import ConfigError, HohError, RunError
 from hoh_cosim.hardware.commands import add_commands as add_hardware_commands
 from hoh_cosim.hardware.commands import run_command as run_hardware_command
+from hoh_cosim.study.commands import add_commands as add_study_commands
+from hoh_cosim.study.commands import run_command as run_study_command
 
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
-SUBCOMMANDS = ("build-fmus", "identify-gravity", "hw", "replay")
+SUBCOMMANDS = ("build-fmus", "identify-gravity", "hw", "replay", "sweep", "report", "tune")
 
 
 class _ArgumentParser(argparse.ArgumentParser):
@@ -95,6 +98,7 @@ def _main_parser() -> argparse.ArgumentParser:
         help="gravity in the base frame, m/s² (default: 0,0,-9.81)",
     )
     add_hardware_commands(sub)
+    add_study_commands(sub)
     return parser
 
 
@@ -249,6 +253,8 @@ def _main(argv: list[str]) -> int:
         if args.command == "build-fmus":
             return _build_fmus(args)
         status = run_hardware_command(args)
+        if status is None:
+            status = run_study_command(args)
         if status is not None:
             return status
         _main_parser().print_help()

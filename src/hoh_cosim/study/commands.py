@@ -1,0 +1,235 @@
+"""The study commands of `hoh-cosim`:
+
+    hoh-cosim sweep SWEEP.yaml [--scheduler ADDRESS] [--workers N] [--out DIR] [--engine E]
+    hoh-cosim report [--out DIR] [--quick] [--workers N] [--scheduler ADDRESS] [--scenarios DIR]
+    hoh-cosim tune [--out DIR] [-n N] [--seed S] [--seeds 1,2,3] [--workers N] [--scheduler ADDRESS]
+
+`--workers 0` runs everything serially in this process (no Dask).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["COMMANDS", "add_commands", "run_command"]
+
+COMMANDS = ("sweep", "report", "tune")
+EXIT_OK, EXIT_FAILED = 0, 1
+
+
+def _cluster_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="local worker processes (default: one per core; 0: run serially, without Dask)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _seeds(text: str) -> tuple[int, ...]:
+    try:
+        seeds = tuple(int(p) for p in text.split(","))
+    except ValueError:
+        seeds = ()
+    if not seeds or min(seeds) < 0:
+        raise argparse.ArgumentTypeError(f"expected integers >= 0 like 1,2,3, got {text!r}")
+    return seeds
+
+
+def add_commands(sub) -> None:
+    sweep = sub.add_parser(
+        "sweep",
+        help="run many variants of a scenario on Dask, one table row per run",
+        description=(
+            "Run a grid or a seeded random sample of scenario variants (any --set parameter, any "
+            "seed) on a local Dask cluster or an existing one; write runs.csv (and runs.parquet "
+            "with pyarrow) with the varied parameters, every metric, status and wall time."
+        ),
+    )
+    sweep.add_argument("sweep", metavar="SWEEP.yaml")
+    sweep.add_argument("--out", metavar="DIR", help="default: sweeps/<sweep name>")
+    sweep.add_argument("--engine", choices=("inprocess", "fmu"), help="instead of the file's")
+    _cluster_options(sweep)
+
+    report = sub.add_parser(
+        "report",
+        help="the verification report: the seed's experiments, linear analysis, tuning",
+        description=(
+            "Run the seed's experiments, the filter and admittance comparisons, the linear "
+            "analysis and the tuning search, and write index.html, report.md, figures, runs.csv "
+            "and summary.json."
+        ),
+    )
+    report.add_argument("--out", metavar="DIR", default="report", help="default: report")
+    report.add_argument("--quick", action="store_true", help="fewer, shorter runs (~1-2 min)")
+    report.add_argument(
+        "--scenarios", metavar="DIR", default="scenarios", help="default: ./scenarios"
+    )
+    _cluster_options(report)
+
+    tune = sub.add_parser(
+        "tune",
+        help="search the Kalman filter and eq. 10 gains for least effort and path error",
+        description=(
+            "Search the Kalman q multiples, the deadband and the slope on circles, subject to "
+            "beating the seed on noise and lag, the loop's stability margins, and a still tip at "
+            "rest; write candidates.csv and best.json."
+        ),
+    )
+    tune.add_argument("--out", metavar="DIR", default="tune", help="default: tune")
+    tune.add_argument("-n", type=int, default=40, metavar="N", help="candidates (default 40)")
+    tune.add_argument("--seed", type=int, default=1, help="of the candidate sample (default 1)")
+    tune.add_argument("--seeds", type=_seeds, default=(1, 2), help="scenario seeds (default 1,2)")
+    tune.add_argument(
+        "--scenarios", metavar="DIR", default="scenarios", help="default: ./scenarios"
+    )
+    _cluster_options(tune)
+
+
+def _check_workers(args: argparse.Namespace) -> None:
+    if args.workers is not None and args.workers < 0:
+        raise ConfigError(f"--workers: expected an integer >= 0, got {args.workers}")
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from hoh_cosim.cosim.run import check_out_dir, jsonable, replace_dir
+    from hoh_cosim.study.sweep import load_sweep, run_variants, table_rows, write_table
+
+    _check_workers(args)
+    sweep = load_sweep(args.sweep, engine=args.engine)
+    out = Path(args.out) if args.out else Path("sweeps") / sweep.name
+    check_out_dir(out, marker="runs.csv", what="sweep")
+    start = time.perf_counter()
+    outcomes = run_variants(
+        sweep.variants,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+        label=sweep.name,
+    )
+    columns, rows = table_rows(outcomes)
+    failed = [o for o in outcomes if not o.ok]
+    info = {
+        "sweep": sweep.name,
+        "file": str(sweep.path),
+        "scenario": str(sweep.scenario),
+        "engine": sweep.engine,
+        "runs": len(outcomes),
+        "failed": len(failed),
+        "wall_s": time.perf_counter() - start,
+        "scheduler": args.scheduler or "local",
+    }
+    written: list[Path] = []
+
+    def fill(staging: Path) -> None:
+        written.extend(out / p.name for p in write_table(staging, columns, rows))
+        (staging / "sweep.json").write_text(
+            json.dumps(jsonable(info), indent=2, allow_nan=False) + "\n", encoding="utf-8"
+        )
+
+    replace_dir(out, fill)
+    print(
+        f"{sweep.name}: {len(outcomes)} runs, {len(failed)} failed, {info['wall_s']:.1f} s "
+        f"({info['scheduler']})"
+    )
+    for o in failed[:5]:
+        print(f"hoh-cosim: run {o.variant.index} failed: {o.error}", file=sys.stderr)
+    for path in written:
+        print(f"wrote {path}")
+    return EXIT_OK if len(failed) < len(outcomes) or not outcomes else EXIT_FAILED
+
+
+def _report(args: argparse.Namespace) -> int:
+    from hoh_cosim.study.verification import FULL, QUICK, build_report
+
+    _check_workers(args)
+    result = build_report(
+        args.out,
+        QUICK if args.quick else FULL,
+        scenarios=args.scenarios,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+    )
+    s = result.summary
+    d = s["default"]
+    print(f"report: {s['runs']} runs in {s['wall_s']:.0f} s, {len(s['failed_runs'])} failed")
+    print(
+        f"  defaults: attenuation {d['attenuation_min']:.2f}x at {d['filter_lag_ms']:.1f} ms "
+        f"lag, gain margin {d['gain_margin']:.2f}, critical slope {d['critical_slope']:.4f}"
+    )
+    t = s["tuned"]
+    if t is None:
+        print("  tuned: no feasible candidate")
+    else:
+        print(
+            f"  tuned: attenuation {t['attenuation_min']:.2f}x at {t['filter_lag_ms']:.1f} ms lag, "
+            f"score {t['score']:.3f} (defaults 2): " + " ".join(f"--set {o}" for o in t["set"])
+        )
+    for line in s["failed_runs"][:5]:
+        print(f"hoh-cosim: failed: {line}", file=sys.stderr)
+    print(f"wrote {result.out / 'index.html'}")
+    return EXIT_FAILED if s["failed_runs"] else EXIT_OK
+
+
+def _tune(args: argparse.Namespace) -> int:
+    from hoh_cosim.study.tune import run_tune
+
+    _check_workers(args)
+    if args.n < 0:
+        raise ConfigError(f"-n: expected an integer >= 0, got {args.n}")
+    result = run_tune(
+        args.out,
+        args.scenarios,
+        n=args.n,
+        seed=args.seed,
+        seeds=args.seeds,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+    )
+    top = result["best"]
+    ref = result["defaults"]
+    print(
+        f"tune: {result['candidates']} candidates, {result['ran']} ran, "
+        f"{result['feasible']} feasible"
+    )
+    print(
+        f"  defaults: attenuation {ref['attenuation_min']:.2f}x at {ref['filter_lag_ms']:.1f} ms, "
+        f"effort {ref['hand_force_rms_N']:.2f} N, path error {1e3 * ref['path_rms_error_m']:.1f} mm, "
+        f"gain margin {ref['gain_margin']:.2f}"
+    )
+    if top is None:
+        print("  no feasible candidate")
+    else:
+        print(
+            f"  best: attenuation {top['attenuation_min']:.2f}x at {top['filter_lag_ms']:.1f} ms, "
+            f"effort {top['hand_force_rms_N']:.2f} N, path error "
+            f"{1e3 * top['path_rms_error_m']:.1f} mm, gain margin {top['gain_margin']:.2f}, "
+            f"score {top['score']:.3f}"
+        )
+        print("  " + " ".join(f"--set {o}" for o in top["set"]))
+    print(f"wrote {Path(args.out) / 'candidates.csv'}")
+    return EXIT_OK
+
+
+def run_command(args: argparse.Namespace) -> int | None:
+    if args.command == "sweep":
+        return _sweep(args)
+    if args.command == "report":
+        return _report(args)
+    if args.command == "tune":
+        return _tune(args)
+    return None

@@ -1,0 +1,230 @@
+"""Linear analysis with python-control: each filter's frequency response, and the stability margins of
+the linearised hand-robot loop.
+
+Filters, each relative to the raw reading as the controller would see it unfiltered (the last packet
+held), which is what the seed's "lag added by the filter" compares against (Fig. 20):
+
+- Kalman (eq. 9, in its steady state): between packets the filter predicts every tick, on a packet it
+  corrects. Over one packet period T = N·dt that is a linear time-invariant system at rate 1/T with
+  the prior as its state (A = Fᴺ, K from `steady_state_gain`):
+      s⁺ = A (I - K H) s + A K z,    y = M (I - K H) s + M K z,    M = (1/N) Σⱼ H Fʲ (j < N),
+  y being the mean of the N tick outputs after the packet: the held raw reading spans the same ticks,
+  so the ratio of the two at a frequency is the filter's gain and phase against it, exactly.
+- Butterworth: its transfer function at the tick rate, run on the held reading: exact.
+- 1€ (Casiez et al.): an exponential smoother per packet whose cutoff rises with the signal's speed,
+  fc = min_cutoff + β |ẋ|. Linearised at a given speed (for a sinusoid of amplitude a at f, the mean
+  |ẋ| = 4 a f), it is the first-order system y_k = y_{k-1} + α (z_k - y_{k-1}) at the packet rate.
+- none: 1.
+
+The loop, along one base axis, with the robot a velocity source (speedL) and the admittance law in its
+linear region (eq. 10 beyond the deadband; the deadband only lowers the gain, so the linear loop is the
+worst case):
+
+    hand:   F = K_h (p_ref - p(t - τ_h)) + D_h (v_ref - v(t - τ_h))      (the operator model)
+    sensor: F̂ = G_filter · e^{-s τ_s} F,  τ_s = latency + (N - 1) dt / 2 (the held packet's mean age)
+    robot:  v = α F̂ delayed by τ_r = latency_cycles / rate + 1 / (2 rate) + controller period / 2
+    open loop:  L(s) = α (K_h + D_h s) / s · G_filter(s) · e^{-s (τ_h + τ_s + τ_r)}
+
+L is evaluated on a frequency grid with the delays exact (no Padé), as a python-control FRD, and
+`stability_margins` reads the margins off it. L has one pole at the origin and none in the right half
+plane, so the loop is stable while the gain margin exceeds 1; since L is proportional to α, the slope at
+which it loses stability is α · (gain margin).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hoh_cosim.control.baselines import one_euro_alpha
+from hoh_cosim.control.estimator import EstimatorParams
+from hoh_cosim.control.kalman import (
+    H_FORCE,
+    KalmanParams,
+    steady_state_gain,
+    transition_matrix,
+)
+from hoh_cosim.errors import ConfigError
+
+__all__ = [
+    "LoopMargins",
+    "LoopModel",
+    "filter_response",
+    "filter_system",
+    "lag_ms",
+    "loop_margins",
+    "loop_model",
+    "open_loop",
+]
+
+OMEGA = np.logspace(-2, math.log10(0.98 * math.pi / 0.005), 3000)
+"""[rad/s] The analysis grid: 0.01 rad/s to just under the packet rate's Nyquist frequency."""
+
+
+def _kalman_axis_system(params: KalmanParams, axis: int, dt: float, ticks: int):
+    import control
+
+    K9, _ = steady_state_gain(params, dt, ticks)
+    F = transition_matrix(dt)
+    idx = [axis, 3 + axis, 6 + axis]  # eq. 9's ordering: force, its rate, its acceleration
+    Fa = F[np.ix_(idx, idx)]
+    K = K9[np.ix_(idx, [axis])]
+    H = H_FORCE[np.ix_([axis], idx)]
+    A = np.linalg.matrix_power(Fa, ticks)
+    M = sum(H @ np.linalg.matrix_power(Fa, j) for j in range(ticks)) / ticks
+    I_KH = np.eye(3) - K @ H
+    return control.ss(A @ I_KH, A @ K, M @ I_KH, M @ K, dt * ticks)
+
+
+def filter_system(
+    params: EstimatorParams,
+    axis: int = 0,
+    *,
+    dt: float = 0.001,
+    signal_speed: float = 0.0,
+):
+    """The hand-force filter of `params` on sensor axis `axis` as a discrete python-control system
+    (None for no filter). `signal_speed` [N/s] is where the 1€ filter is linearised."""
+    import control
+    from scipy import signal as sps
+
+    kind = params.filter
+    period = params.ft_packet_period_s
+    ticks = round(period / dt)
+    if ticks < 1 or not math.isclose(ticks * dt, period, rel_tol=1e-6):
+        raise ConfigError(f"ft_packet_period_s: {period} s is not a whole number of {dt} s ticks")
+    if kind in ("kalman", "steady_kalman"):
+        return _kalman_axis_system(params.hand_force_kalman, axis, dt, ticks)
+    if kind == "butterworth":
+        b, a = sps.butter(params.butterworth.order, params.butterworth.cutoff_hz, fs=1.0 / dt)
+        return control.tf(b, a, dt)
+    if kind == "one_euro":
+        p = params.one_euro_force
+        cutoff = p.min_cutoff_hz + p.beta * abs(signal_speed)
+        alpha = float(one_euro_alpha(1.0 / period, cutoff))
+        return control.tf([alpha, 0.0], [1.0, alpha - 1.0], period)
+    return None
+
+
+def filter_response(
+    params: EstimatorParams,
+    omega: np.ndarray,
+    axis: int = 0,
+    *,
+    dt: float = 0.001,
+    signal_speed: float = 0.0,
+) -> np.ndarray:
+    """Complex gain of the hand-force filter at `omega` [rad/s] against the held raw reading."""
+    import control
+
+    system = filter_system(params, axis, dt=dt, signal_speed=signal_speed)
+    if system is None:
+        return np.ones(len(omega), dtype=complex)
+    nyquist = math.pi / system.dt
+    if np.max(omega) >= nyquist:
+        raise ConfigError(
+            f"omega: up to {np.max(omega):.4g} rad/s, beyond the filter's Nyquist {nyquist:.4g}"
+        )
+    response = control.frequency_response(system, omega)
+    return np.asarray(response.complex).reshape(-1)
+
+
+def lag_ms(response: complex, omega: float) -> float:
+    """[ms] The delay that a phase of `response` at `omega` amounts to (negative: a lead)."""
+    return -1e3 * float(np.angle(response)) / omega
+
+
+@dataclass(frozen=True)
+class LoopModel:
+    """The linearised loop along one base axis (see the module docstring)."""
+
+    slope: float  # α [m/(s·N)]
+    hand_stiffness: float  # K_h [N/m]
+    hand_damping: float  # D_h [N·s/m]
+    hand_delay_s: float  # τ_h
+    sensor_delay_s: float  # τ_s
+    robot_delay_s: float  # τ_r
+
+    @property
+    def delay_s(self) -> float:
+        return self.hand_delay_s + self.sensor_delay_s + self.robot_delay_s
+
+
+def loop_model(scenario, axis: int = 0) -> LoopModel:
+    """The loop of a hand-guiding scenario (operator, plant, ft150, controller) along base `axis`."""
+    op = scenario.component_of_kind("operator")
+    plant = scenario.component_of_kind("plant")
+    ft = scenario.component_of_kind("ft150")
+    ctrl = scenario.component_of_kind("controller")
+    missing = [
+        k
+        for k, c in (("operator", op), ("plant", plant), ("ft150", ft), ("controller", ctrl))
+        if c is None
+    ]
+    if missing:
+        raise ConfigError(f"{scenario.path}: the loop model needs a {' and a '.join(missing)}")
+    dt = scenario.dt_s
+    ft_period = 1.0 / ft.params.rate_hz
+    ticks = max(1, round(ft_period / dt))
+    arm = plant.params.arm
+    return LoopModel(
+        slope=float(ctrl.params.translation.slope[axis]),
+        hand_stiffness=float(op.params.stiffness),
+        hand_damping=float(op.params.damping),
+        hand_delay_s=float(op.params.reaction_delay_s),
+        sensor_delay_s=float(ft.params.latency_s) + (ticks - 1) * dt / 2.0,
+        robot_delay_s=arm.latency_cycles / arm.rate_hz + 0.5 / arm.rate_hz + 0.5 * ctrl.every * dt,
+    )
+
+
+def open_loop(model: LoopModel, filter_gain: np.ndarray, omega: np.ndarray):
+    """L(iω) as a python-control FRD."""
+    import control
+
+    s = 1j * omega
+    L = (
+        model.slope
+        * (model.hand_stiffness + model.hand_damping * s)
+        / s
+        * filter_gain
+        * np.exp(-s * model.delay_s)
+    )
+    return control.frd(L, omega)
+
+
+@dataclass(frozen=True)
+class LoopMargins:
+    gain_margin: float  # factor (inf: none)
+    phase_margin_deg: float
+    crossover_rad_s: float  # where |L| = 1
+    phase_crossover_rad_s: float  # where ∠L = -180°
+    critical_slope: float  # α at which the loop loses stability
+
+    @property
+    def gain_margin_db(self) -> float:
+        return 20.0 * math.log10(self.gain_margin) if math.isfinite(self.gain_margin) else math.inf
+
+
+def loop_margins(model: LoopModel, filter_gain: np.ndarray, omega: np.ndarray) -> LoopMargins:
+    """The smallest gain and phase margins over every crossover on the grid (a delayed loop crosses
+    -180° many times; the loop goes unstable at the first crossover whose gain reaches 1)."""
+    import control
+
+    gms, pms, _, wpcs, wgcs, _ = control.stability_margins(
+        open_loop(model, filter_gain, omega), returnall=True
+    )
+    gms, pms = np.asarray(gms, dtype=float), np.asarray(pms, dtype=float)
+    wpcs, wgcs = np.asarray(wpcs, dtype=float), np.asarray(wgcs, dtype=float)
+    if gms.size:
+        i = int(np.argmin(gms))
+        gm, wpc = float(gms[i]), float(wpcs[i])
+    else:
+        gm, wpc = math.inf, math.nan
+    if pms.size:
+        j = int(np.argmin(pms))
+        pm, wgc = float(pms[j]), float(wgcs[j])
+    else:
+        pm, wgc = math.inf, math.nan
+    return LoopMargins(gm, pm, wgc, wpc, model.slope * gm)

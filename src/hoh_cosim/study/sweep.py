@@ -1,0 +1,513 @@
+"""Sweeps: many variants of a scenario run on Dask, one table row per run.
+
+A sweep file names a scenario and how to vary it:
+
+    name: slope_sweep                  # optional: the file's stem
+    scenario: ../scenarios/circles.yaml  # relative to this file
+    engine: inprocess                  # or fmu; inprocess is bit-identical and twice as fast
+    duration_s: 20                     # optional: instead of the scenario's
+    seeds: [1, 2, 3]                   # every variant runs with each (default: the scenario's)
+    set:                               # fixed for every run, as --set
+      controller.translation.law: deadband_linear
+    grid:                              # every combination of these values
+      controller.translation.slope: [0.01, 0.0125, 0.015]
+      estimator.filter: [kalman, butterworth]
+    random:                            # or (not with grid) n seeded random samples
+      n: 20
+      seed: 7
+      params:
+        estimator.butterworth.cutoff_hz: {uniform: [2.0, 20.0]}
+        estimator.hand_force_kalman.q[1]: {log_uniform: [1.0, 1000.0]}
+        estimator.filter: {choice: [kalman, one_euro]}
+
+Every parameter is one `--set` path. Every variant is checked against the scenario before anything
+runs, so a misspelt parameter or an impossible value is one error line naming the sweep file and
+the key, not a thousand failed rows.
+
+The runs go to a Dask cluster: by default a local one of worker processes on this machine, or an
+existing one at `--scheduler tcp://host:port`. Each run is independent (its own components, its own
+seeded random streams), so where it ran does not change its numbers: the table equals the serial
+one except for wall times. A run that fails is a row with status `failed` and its error; a worker
+that dies is retried by Dask, then recorded the same way. The table: `run`, `seed`, one column per
+varied parameter, `status`, `error`, `wall_s`, then every metric (vectors as `name[1]`, `name[2]`,
+...), as CSV and, with pyarrow installed, Parquet.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hoh_cosim.errors import ConfigError, HohError
+from hoh_cosim.yamlfile import Where, read_yaml
+
+__all__ = [
+    "Outcome",
+    "Sweep",
+    "Variant",
+    "load_sweep",
+    "run_variant",
+    "run_variants",
+    "table_rows",
+    "write_table",
+]
+
+ENGINES = ("inprocess", "fmu")
+_TOP_KEYS = ("name", "scenario", "engine", "duration_s", "seeds", "set", "grid", "random")
+_DISTRIBUTIONS = ("uniform", "log_uniform", "integer", "choice")
+FIXED_COLUMNS = ("run", "seed")
+STATUS_COLUMNS = ("status", "error", "wall_s")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One run: the scenario, its `--set` overrides and seed, and what to bring back besides the
+    metrics (recorded signals every `keep_every` ticks; the metric set's intermediate data)."""
+
+    index: int
+    scenario: str
+    overrides: tuple[str, ...] = ()
+    values: tuple[tuple[str, Any], ...] = ()  # the varied parameters, for the table
+    seed: int | None = None
+    duration_s: float | None = None
+    engine: str = "inprocess"
+    keep: tuple[str, ...] = ()
+    keep_every: int = 10
+    keep_data: bool = False
+
+
+@dataclass
+class Outcome:
+    """What one run gave: status "ok" or "failed" (then `error` says why)."""
+
+    variant: Variant
+    status: str
+    seed: int | None = None
+    error: str = ""
+    wall_s: float = math.nan
+    metrics: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    time: np.ndarray | None = None
+    signals: dict[str, np.ndarray] = field(default_factory=dict)
+    data: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+def run_variant(variant: Variant) -> Outcome:
+    """Load, run and measure one variant, in whatever process this is; never raises for a run
+    that fails (the outcome says so), only for an interrupt."""
+    from hoh_cosim.cosim.engines import simulate
+    from hoh_cosim.cosim.report import compute_report
+    from hoh_cosim.cosim.scenario import load_scenario
+
+    start = time.perf_counter()
+    try:
+        scenario = load_scenario(
+            variant.scenario, variant.overrides, variant.duration_s, variant.seed
+        )
+        rec = simulate(scenario, variant.engine, progress=False)
+        report = compute_report(scenario, rec)
+    except Exception as exc:
+        text = str(exc) if isinstance(exc, HohError) else f"{type(exc).__name__}: {exc}"
+        return Outcome(
+            variant,
+            "failed",
+            seed=variant.seed,
+            error=" ".join(text.split()),
+            wall_s=time.perf_counter() - start,
+        )
+    rows = slice(None, None, variant.keep_every)
+    signals = {name: rec[name][rows].copy() for name in variant.keep}
+    return Outcome(
+        variant,
+        "ok",
+        seed=scenario.seed,
+        wall_s=time.perf_counter() - start,
+        metrics=dict(report.metrics),
+        notes=list(report.notes),
+        time=rec.time[rows].copy() if variant.keep else None,
+        signals=signals,
+        data=dict(report.data) if variant.keep_data else {},
+    )
+
+
+class _Bar:
+    """A one-line count of finished runs on a terminal."""
+
+    def __init__(self, label: str, total: int, enabled: bool) -> None:
+        self.label, self.total = label, total
+        self.enabled = enabled and sys.stderr.isatty()
+        self.start = time.perf_counter()
+        self.done = self.failed = 0
+
+    def update(self, outcome: Outcome) -> None:
+        self.done += 1
+        self.failed += not outcome.ok
+        if not self.enabled:
+            return
+        elapsed = time.perf_counter() - self.start
+        eta = elapsed / self.done * (self.total - self.done)
+        bar = "#" * int(30 * self.done / self.total)
+        failed = f", {self.failed} failed" if self.failed else ""
+        sys.stderr.write(
+            f"\r{self.label} [{bar:<30}] {self.done}/{self.total} runs{failed}, {eta:.0f} s left "
+        )
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled and self.done:
+            sys.stderr.write("\r" + " " * 79 + "\r")
+            sys.stderr.flush()
+
+
+def _failed(variant: Variant, exc: BaseException) -> Outcome:
+    text = " ".join(f"{type(exc).__name__}: {exc}".split())
+    return Outcome(variant, "failed", seed=variant.seed, error=text)
+
+
+def run_variants(
+    variants: Sequence[Variant],
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+    label: str = "sweep",
+    on_outcome: Callable[[Outcome], None] | None = None,
+) -> list[Outcome]:
+    """Run every variant, in `variants` order: serially in this process when `workers` is 0 and no
+    scheduler is given; else on the Dask cluster at `scheduler`, or on a local cluster of `workers`
+    worker processes (default: one per core), one thread each (the runs are pure Python)."""
+    bar = _Bar(label, len(variants), progress)
+    outcomes: dict[int, Outcome] = {}
+
+    def finish(i: int, outcome: Outcome) -> None:
+        outcomes[i] = outcome
+        bar.update(outcome)
+        if on_outcome is not None:
+            on_outcome(outcome)
+
+    try:
+        if scheduler is None and workers == 0:
+            for i, variant in enumerate(variants):
+                finish(i, run_variant(variant))
+        else:
+            _run_on_dask(variants, workers, scheduler, finish)
+    finally:
+        bar.close()
+    return [outcomes[i] for i in range(len(variants))]
+
+
+def _run_on_dask(
+    variants: Sequence[Variant],
+    workers: int | None,
+    scheduler: str | None,
+    finish: Callable[[int, Outcome], None],
+) -> None:
+    import logging
+
+    from distributed import Client, LocalCluster, as_completed
+
+    if not variants:
+        return
+    cluster = None
+    try:
+        if scheduler is None:
+            n = workers if workers is not None else (os.cpu_count() or 1)
+            if n < 1:
+                raise ConfigError(f"--workers: expected an integer >= 0, got {n}")
+            cluster = LocalCluster(
+                n_workers=min(n, len(variants)),
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=":0",  # a free port: never clash with a running cluster
+                silence_logs=logging.ERROR,
+            )
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=10)
+            except (OSError, TimeoutError) as exc:
+                raise ConfigError(
+                    f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})"
+                ) from None
+        with client:
+            futures = {client.submit(run_variant, v, pure=False): i for i, v in enumerate(variants)}
+            for future in as_completed(futures):
+                i = futures[future]
+                try:
+                    outcome = future.result()
+                except Exception as exc:  # a worker died with it, or it could not be sent
+                    outcome = _failed(variants[i], exc)
+                finish(i, outcome)
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+# -- sweep files ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Sweep:
+    name: str
+    path: Path
+    scenario: Path
+    engine: str
+    duration_s: float | None
+    variants: tuple[Variant, ...]
+    parameters: tuple[str, ...]  # the varied ones, in column order
+
+
+def _sample(rng: np.random.Generator, spec: Any, where: str, w: Where) -> Any:
+    spec = w.mapping(spec, _DISTRIBUTIONS, where)
+    if len(spec) != 1:
+        raise w.error(where, f"expected one of {', '.join(_DISTRIBUTIONS)}, got {dict(spec)!r}")
+    ((kind, arg),) = spec.items()
+    if kind == "choice":
+        if not isinstance(arg, list) or not arg:
+            raise w.error(f"{where}.choice", f"expected a non-empty list, got {arg!r}")
+        return arg[int(rng.integers(len(arg)))]
+    if not (isinstance(arg, list) and len(arg) == 2):
+        raise w.error(f"{where}.{kind}", f"expected [low, high], got {arg!r}")
+    low = w.number(arg[0], f"{where}.{kind}[0]")
+    high = w.number(arg[1], f"{where}.{kind}[1]")
+    if high < low:
+        raise w.error(f"{where}.{kind}", f"expected low <= high, got [{low:g}, {high:g}]")
+    if kind == "uniform":
+        return float(rng.uniform(low, high))
+    if kind == "integer":
+        if low != int(low) or high != int(high):
+            raise w.error(f"{where}.integer", f"expected integer bounds, got {arg!r}")
+        return int(rng.integers(int(low), int(high) + 1))
+    if low <= 0:
+        raise w.error(f"{where}.log_uniform", f"expected bounds > 0, got {arg!r}")
+    return float(math.exp(rng.uniform(math.log(low), math.log(high))))
+
+
+def _value_text(value: Any) -> str:
+    """A value as `--set` reads it back (YAML flow style, floats exact)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_value_text(v) for v in value) + "]"
+    return str(value)
+
+
+def set_option(path: str, value: Any) -> str:
+    """`component.parameter=value` for `--set` (and `Variant.overrides`)."""
+    return f"{path}={_value_text(value)}"
+
+
+def _check(
+    scenario: Path,
+    base: tuple[str, ...],
+    point: Mapping[str, Any],
+    duration: float | None,
+    where_of: Mapping[str, str],
+    w: Where,
+) -> None:
+    """Load the scenario with one variant's overrides; a mistake names the key that made it."""
+    from hoh_cosim.cosim.scenario import load_scenario
+
+    overrides = base
+    for key, value in point.items():
+        overrides = (*overrides, set_option(key, value))
+        try:
+            load_scenario(scenario, overrides, duration)
+        except ConfigError as exc:
+            raise w.error(where_of[key], str(exc)) from None
+
+
+def load_sweep(path: str | Path, engine: str | None = None) -> Sweep:
+    """Read a sweep file and check every variant against its scenario."""
+    from hoh_cosim.cosim.scenario import load_scenario
+
+    path = Path(path)
+    w = Where(path)
+    raw = w.mapping(read_yaml(path), _TOP_KEYS, "")
+    if "scenario" not in raw:
+        raise w.error("scenario", "missing")
+    name = w.string(raw.get("name", path.stem), "name")
+    scenario = (path.parent / w.string(raw["scenario"], "scenario")).resolve()
+    if engine is None:
+        engine = w.string(raw.get("engine", "inprocess"), "engine", choices=ENGINES)
+    duration = raw.get("duration_s")
+    if duration is not None:
+        duration = w.number(duration, "duration_s", positive=True)
+    seeds_raw = raw.get("seeds", [None])
+    if not isinstance(seeds_raw, list) or not seeds_raw:
+        raise w.error("seeds", f"expected a non-empty list of integers, got {seeds_raw!r}")
+    seeds = [None if s is None else w.integer(s, f"seeds[{i}]") for i, s in enumerate(seeds_raw)]
+    fixed = w.mapping(raw.get("set") or {}, list(raw.get("set") or {}), "set")
+    if "grid" in raw and "random" in raw:
+        raise w.error("random", "give either grid or random, not both")
+
+    points: list[dict[str, Any]]
+    if "grid" in raw:
+        grid = w.mapping(raw["grid"], list(raw["grid"] or {}), "grid")
+        for key, values in grid.items():
+            if not isinstance(values, list) or not values:
+                raise w.error(f"grid.{key}", f"expected a non-empty list of values, got {values!r}")
+        keys = list(grid)
+        points = [
+            dict(zip(keys, combo, strict=True)) for combo in itertools.product(*grid.values())
+        ]
+        where_of = {key: f"grid.{key}" for key in keys}
+    elif "random" in raw:
+        rand = w.mapping(raw["random"], ("n", "seed", "params"), "random")
+        n = w.integer(rand.get("n"), "random.n", low=1)
+        rng = np.random.default_rng(w.integer(rand.get("seed", 0), "random.seed"))
+        params = w.mapping(rand.get("params"), list(rand.get("params") or {}), "random.params")
+        if not params:
+            raise w.error("random.params", "expected at least one parameter")
+        keys = list(params)
+        points = [
+            {key: _sample(rng, params[key], f"random.params.{key}", w) for key in keys}
+            for _ in range(n)
+        ]
+        where_of = {key: f"random.params.{key}" for key in keys}
+    else:
+        keys, points, where_of = [], [{}], {}
+
+    base = tuple(set_option(k, v) for k, v in fixed.items())
+    try:
+        load_scenario(scenario, base, duration)
+    except ConfigError as exc:
+        raise w.error("scenario" if not base else "set", str(exc)) from None
+    variants = []
+    checked: set[tuple[str, ...]] = {base}
+    for point in points:
+        overrides = base + tuple(set_option(k, v) for k, v in point.items())
+        if overrides not in checked:
+            _check(scenario, base, point, duration, where_of, w)
+            checked.add(overrides)
+        for seed in seeds:
+            variants.append(
+                Variant(
+                    len(variants),
+                    str(scenario),
+                    overrides,
+                    tuple(point.items()),
+                    seed,
+                    duration,
+                    engine,
+                )
+            )
+    return Sweep(name, path, scenario, engine, duration, tuple(variants), tuple(keys))
+
+
+# -- the table -----------------------------------------------------------------------------------
+
+
+def _cell(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, list | tuple | dict):
+        return json.dumps(value)
+    return value
+
+
+def table_rows(outcomes: Iterable[Outcome]) -> tuple[list[str], list[dict[str, Any]]]:
+    """The sweep's table: columns in order and one row (column -> value) per run."""
+    rows: list[dict[str, Any]] = []
+    params: dict[str, None] = {}
+    metrics: dict[str, None] = {}
+    for outcome in outcomes:
+        row: dict[str, Any] = {"run": outcome.variant.index, "seed": outcome.seed}
+        for key, value in outcome.variant.values:
+            params[key] = None
+            row[key] = _cell(value)
+        row.update(status=outcome.status, error=outcome.error, wall_s=outcome.wall_s)
+        for key, value in outcome.metrics.items():
+            if key == "wall_s":  # the simulation's share of the run's own wall_s
+                continue
+            if isinstance(value, list | tuple | np.ndarray):
+                for i, v in enumerate(value):
+                    name = f"{key}[{i + 1}]"
+                    metrics[name] = None
+                    row[name] = _cell(v)
+            else:
+                metrics[key] = None
+                row[key] = _cell(value)
+        rows.append(row)
+    columns = [*FIXED_COLUMNS, *params, *STATUS_COLUMNS, *metrics]
+    return columns, rows
+
+
+def csv_text(columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        cells = []
+        for column in columns:
+            value = row.get(column)
+            if value is None or (isinstance(value, float) and math.isnan(value)):
+                cells.append("")
+            elif isinstance(value, float):
+                cells.append(repr(value))
+            else:
+                cells.append(value)
+        writer.writerow(cells)
+    return buffer.getvalue()
+
+
+def _parquet(path: Path, columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    arrays = {}
+    for column in columns:
+        values = [row.get(column) for row in rows]
+        kinds = {type(v) for v in values if v is not None}
+        if kinds <= {int} and kinds:
+            arrays[column] = pa.array(values, type=pa.int64())
+        elif kinds <= {int, float} and kinds:
+            arrays[column] = pa.array(
+                [None if v is None else float(v) for v in values], type=pa.float64()
+            )
+        elif kinds <= {bool} and kinds:
+            arrays[column] = pa.array(values, type=pa.bool_())
+        else:
+            arrays[column] = pa.array(
+                [None if v is None else str(v) for v in values], type=pa.string()
+            )
+    pq.write_table(pa.table(arrays), path)
+
+
+def parquet_available() -> bool:
+    try:
+        import pyarrow.parquet  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def write_table(
+    directory: Path, columns: Sequence[str], rows: Sequence[Mapping[str, Any]]
+) -> list[Path]:
+    """runs.csv, and runs.parquet when pyarrow is installed, into `directory`."""
+    written = [directory / "runs.csv"]
+    written[0].write_text(csv_text(columns, rows), encoding="utf-8")
+    if parquet_available():
+        written.append(directory / "runs.parquet")
+        _parquet(written[-1], columns, rows)
+    return written

@@ -1,0 +1,121 @@
+"""The linear analysis: python-control's models of the filters against the filters themselves, and
+the loop margins against cases worked by hand."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from hoh_cosim.control.baselines import ButterworthParams, OneEuroParams
+from hoh_cosim.control.estimator import EstimatorParams, make_filter_bank
+from hoh_cosim.cosim.metrics import sinusoid_phase
+from hoh_cosim.cosim.scenario import load_scenario
+from hoh_cosim.study.linear import (
+    OMEGA,
+    LoopModel,
+    filter_response,
+    lag_ms,
+    loop_margins,
+    loop_model,
+)
+from tests.integration.test_scenarios import SCENARIOS
+
+DT = 0.001
+TICKS = 5  # FT-150 packets every 5 ms
+
+
+def _measured(params: EstimatorParams, frequency_hz: float) -> tuple[float, float]:
+    """Gain and lag [ms] of the estimator's hand-force filter against the held raw packets, from
+    20 s of a sinusoid stepped through the real filter bank."""
+    bank = make_filter_bank(params)
+    n = 20_000
+    t = np.arange(n) * DT
+    z = np.sin(2 * math.pi * frequency_hz * t)
+    out, held = np.empty(n), np.empty(n)
+    value = 0.0
+    for k in range(n):
+        packet = None
+        if k % TICKS == 0:
+            value = z[k]
+            packet = np.array([value, 0.0, 0.0])
+        out[k] = bank.step_bank(DT, [packet, None, None])[0]
+        held[k] = value
+    late = slice(n // 2, None)
+    a_raw, phi_raw = sinusoid_phase(t[late], held[late], frequency_hz)
+    a_out, phi_out = sinusoid_phase(t[late], out[late], frequency_hz)
+    dphi = (phi_raw - phi_out + math.pi) % (2 * math.pi) - math.pi
+    return a_out / a_raw, 1e3 * dphi / (2 * math.pi * frequency_hz)
+
+
+FILTERS = {
+    "kalman": EstimatorParams(filter="kalman"),
+    "butterworth": EstimatorParams(
+        filter="butterworth", butterworth=ButterworthParams(order=5, cutoff_hz=5.0)
+    ),
+    # with beta = 0 the 1-euro filter is exactly linear
+    "one_euro": EstimatorParams(
+        filter="one_euro", one_euro_force=OneEuroParams(min_cutoff_hz=2.0, beta=0.0)
+    ),
+    "none": EstimatorParams(filter="none"),
+}
+
+
+@pytest.mark.parametrize("kind", FILTERS)
+@pytest.mark.parametrize("frequency_hz", [0.25, 1.8, 6.0])
+def test_the_linear_model_is_the_filter(kind: str, frequency_hz: float) -> None:
+    params = FILTERS[kind]
+    w = 2 * math.pi * frequency_hz
+    g = filter_response(params, np.array([w]))[0]
+    gain, lag = _measured(params, frequency_hz)
+    assert abs(g) == pytest.approx(gain, rel=2e-3)
+    assert lag_ms(g, w) == pytest.approx(lag, abs=0.1)
+
+
+def test_the_default_kalman_leads_and_peaks() -> None:
+    """What the report says about the defaults: a lead at the circle frequency (the circles run
+    measures -3.6 ms) and a gain peak of about 1.6 near 2 Hz."""
+    params = EstimatorParams()
+    w0 = 2 * math.pi * 0.25
+    assert lag_ms(filter_response(params, np.array([w0]))[0], w0) == pytest.approx(-3.66, abs=0.05)
+    gain = np.abs(filter_response(params, OMEGA))
+    assert gain.max() == pytest.approx(1.58, abs=0.02)
+    assert 1.2 < OMEGA[np.argmax(gain)] / (2 * math.pi) < 2.5
+
+
+def test_margins_of_an_integrator_with_delay() -> None:
+    """L = α K e^{-sT} / s: the phase reaches -180° at ω = π / (2T), where |L| = α K / ω, so the
+    loop loses stability at α = π / (2 T K); the phase margin is 90° - ω_c T · 180/π at ω_c = α K."""
+    model = LoopModel(
+        slope=0.01,
+        hand_stiffness=300.0,
+        hand_damping=0.0,
+        hand_delay_s=0.15,
+        sensor_delay_s=0.0,
+        robot_delay_s=0.0,
+    )
+    margins = loop_margins(model, np.ones(len(OMEGA), dtype=complex), OMEGA)
+    assert margins.critical_slope == pytest.approx(math.pi / (2 * 0.15 * 300.0), rel=1e-4)
+    assert margins.phase_crossover_rad_s == pytest.approx(math.pi / 0.3, rel=1e-4)
+    assert margins.phase_margin_deg == pytest.approx(90.0 - math.degrees(3.0 * 0.15), abs=0.01)
+
+
+def test_the_gain_margin_is_inverse_in_the_slope() -> None:
+    scenario = load_scenario(SCENARIOS / "circles.yaml")
+    model = loop_model(scenario)
+    gain = filter_response(scenario.component_of_kind("estimator").params, OMEGA)
+    base = loop_margins(model, gain, OMEGA)
+    double = loop_margins(dataclasses.replace(model, slope=2 * model.slope), gain, OMEGA)
+    assert double.gain_margin == pytest.approx(base.gain_margin / 2, rel=1e-6)
+    assert double.critical_slope == pytest.approx(base.critical_slope, rel=1e-6)
+
+
+def test_loop_model_reads_the_scenario() -> None:
+    model = loop_model(load_scenario(SCENARIOS / "circles.yaml"))
+    assert model.slope == 0.0125
+    assert model.hand_delay_s == 0.15
+    # FT-150 latency 2 ms + the held packet's mean age 2 ms; CB3 one 8 ms cycle + 4 ms + 4 ms
+    assert model.sensor_delay_s == pytest.approx(0.004)
+    assert model.robot_delay_s == pytest.approx(0.016)
