@@ -64,7 +64,7 @@ def test_every_file_is_there(report: Path) -> None:
     ):
         assert title in md
     # the seed's own figures, quoted beside ours
-    assert "| max |noise| before, x/y/z [N] | 1.15/1.06/0.31 |" in md
+    assert "| max abs noise before, x/y/z [N] | 1.15/1.06/0.31 |" in md
     assert "| -mg [N], with cable | -4.7631 (scale: 0.48 kg) |" in md
     assert (report / "runs.csv").is_file()
 

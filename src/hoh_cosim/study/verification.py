@@ -187,9 +187,11 @@ class Table:
     rows: list[list[str]]
 
     def markdown(self) -> str:
-        lines = [f"**{self.title}**", "", "| " + " | ".join(self.header) + " |"]
-        lines.append("|" + "---|" * len(self.header))
-        lines += ["| " + " | ".join(r) + " |" for r in self.rows]
+        def line(cells: Sequence[str]) -> str:
+            return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
+
+        lines = [f"**{self.title}**", "", line(self.header), "|" + "---|" * len(self.header)]
+        lines += [line(r) for r in self.rows]
         return "\n".join(lines) + "\n"
 
     def html(self) -> str:
@@ -645,7 +647,7 @@ def _gravity(got, figures, circles) -> Section:
                 "p_COM x/y [m]",
                 "force residual RMS before x/y/z [N]",
                 "after [N]",
-                "max |residual| after",
+                "max abs residual after",
             ],
             rows,
         )
@@ -671,7 +673,7 @@ def _gravity(got, figures, circles) -> Section:
                         lw=1,
                         label=f"{t:.0f}°",
                     )
-                ax.set_title(f"{axis} |residual| [N], {name}", fontsize=9)
+                ax.set_title(f"{axis} abs residual [N], {name}", fontsize=9)
             axes[r, 0].legend(fontsize=7, loc="lower left", title="tilt", title_fontsize=7)
         fig.tight_layout()
         figures["gravity_radar.png"] = png(fig)
@@ -999,8 +1001,8 @@ def _seed_versus_us(got, s: ReportSettings, evaluations) -> Section:
     lag = _metric(got["circles|kalman ×1"], "filter_lag_ms")
     est_lag = _metric(got["circles|kalman ×1"], "estimate_lag_ms")
     rows = [
-        ["max |noise| before, x/y/z [N]", _f(SEED["noise_before_N"], ".2f"), _f(raw, ".2f")],
-        ["max |noise| after, x/y/z [N]", _f(SEED["noise_after_N"], ".2f"), _f(filtered, ".2f")],
+        ["max abs noise before, x/y/z [N]", _f(SEED["noise_before_N"], ".2f"), _f(raw, ".2f")],
+        ["max abs noise after, x/y/z [N]", _f(SEED["noise_after_N"], ".2f"), _f(filtered, ".2f")],
         [
             "attenuation x/y/z",
             _f(list(np.divide(SEED["noise_before_N"], SEED["noise_after_N"])), ".2f"),
