@@ -51,6 +51,8 @@ __all__ = [
     "best",
     "evaluate",
     "make_candidates",
+    "mean_attenuation",
+    "mean_metric",
     "run_tune",
     "tune_variants",
 ]
@@ -241,9 +243,23 @@ class Evaluation:
         }
 
 
-def _mean(values: Sequence[float | None]) -> float | None:
-    good = [v for v in values if v is not None and math.isfinite(v)]
-    return float(np.mean(good)) if good and len(good) == len(values) else None
+def mean_metric(outcomes: Sequence[Outcome], key: str) -> Any:
+    """The mean over runs (seeds) of one metric, a number or a list per axis; None if a run failed
+    or any value is missing or not finite."""
+    values = [o.metrics.get(key) if o.ok else None for o in outcomes]
+    if not values or any(v is None for v in values):
+        return None
+    array = np.array(values, dtype=float)  # a None inside a vector becomes NaN
+    if not np.all(np.isfinite(array)):
+        return None
+    mean = np.mean(array, axis=0)
+    return float(mean) if mean.ndim == 0 else mean.tolist()
+
+
+def mean_attenuation(outcomes: Sequence[Outcome]) -> tuple[float | None, list[float] | None]:
+    """static_noise's attenuation per axis averaged over runs, and its smallest axis."""
+    axes = mean_metric(outcomes, "noise_attenuation")
+    return (None, None) if axes is None else (float(np.min(axes)), axes)
 
 
 def evaluate(
@@ -272,16 +288,13 @@ def evaluate(
             ev.reason = f"run failed: {failed[0].error}"
             evaluations.append(ev)
             continue
-        axes = np.array(
-            [[np.nan if a is None else a for a in o.metrics["noise_attenuation"]] for o in static]
-        )
-        ev.attenuation_axes = np.mean(axes, axis=0).tolist()
-        ev.attenuation = float(np.min(ev.attenuation_axes))
-        ev.rest_motion_m = _mean([o.metrics.get("rest_motion_m") for o in static])
-        ev.lag_ms = _mean([o.metrics.get("filter_lag_ms") for o in circles])
-        ev.effort_N = _mean([o.metrics.get("hand_force_rms_N") for o in circles])
-        ev.path_error_m = _mean([o.metrics.get("path_rms_error_m") for o in circles])
-        ev.velocity_hf_m_s = _mean([o.metrics.get("velocity_hf_rms_m_s") for o in circles])
+        ev.attenuation, axes = mean_attenuation(static)
+        ev.attenuation_axes = axes or []
+        ev.rest_motion_m = mean_metric(static, "rest_motion_m")
+        ev.lag_ms = mean_metric(circles, "filter_lag_ms")
+        ev.effort_N = mean_metric(circles, "hand_force_rms_N")
+        ev.path_error_m = mean_metric(circles, "path_rms_error_m")
+        ev.velocity_hf_m_s = mean_metric(circles, "velocity_hf_rms_m_s")
         evaluations.append(ev)
 
     reference = evaluations[0]

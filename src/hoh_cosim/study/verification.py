@@ -255,21 +255,6 @@ def _metric(outcome: Outcome | None, key: str) -> Any:
     return outcome.metrics.get(key)
 
 
-def _min_attenuation(outcomes: Sequence[Outcome]) -> tuple[float | None, list[float] | None]:
-    rows = [_metric(o, "noise_attenuation") for o in outcomes]
-    if not rows or any(r is None or None in r for r in rows):
-        return None, None
-    axes = np.mean(np.array(rows, dtype=float), axis=0)
-    return float(np.min(axes)), axes.tolist()
-
-
-def _mean_metric(outcomes: Sequence[Outcome], key: str) -> Any:
-    values = [_metric(o, key) for o in outcomes]
-    if not values or any(v is None for v in values):
-        return None
-    return np.mean(np.array(values, dtype=float), axis=0).tolist()
-
-
 def build_report(
     out: str | Path,
     settings: ReportSettings,
@@ -479,7 +464,7 @@ def _noise_vs_lag(got, filters, s, linear, evaluations, figures) -> Section:
     rows, points = [], {}
     for label in filters:
         static = [got[f"static|{label}|{seed}"] for seed in s.seeds]
-        att, axes = _min_attenuation(static)
+        att, axes = tuning.mean_attenuation(static)
         circ = got[f"circles|{label}"]
         lag = _metric(circ, "filter_lag_ms")
         points[label] = (lag, att)
@@ -996,8 +981,8 @@ def _seed_versus_us(got, s: ReportSettings, evaluations) -> Section:
         "the row says otherwise). The seed's are read from its text (000, 4.B, 4.C, 5.B)."
     )
     static = [got[f"static|kalman ×1|{seed}"] for seed in s.seeds]
-    raw = _mean_metric(static, "noise_max_abs_raw_N")
-    filtered = _mean_metric(static, "noise_max_abs_filtered_N")
+    raw = tuning.mean_metric(static, "noise_max_abs_raw_N")
+    filtered = tuning.mean_metric(static, "noise_max_abs_filtered_N")
     lag = _metric(got["circles|kalman ×1"], "filter_lag_ms")
     est_lag = _metric(got["circles|kalman ×1"], "estimate_lag_ms")
     rows = [
@@ -1054,7 +1039,7 @@ def _summary(got, s, linear, evaluations, failed, wall_s) -> dict[str, Any]:
     top = tuning.best(evaluations)
     dm = linear["default_margins"]
     static = [got[f"static|kalman ×1|{seed}"] for seed in s.seeds]
-    att, axes = _min_attenuation(static)
+    att, axes = tuning.mean_attenuation(static)
     return {
         "quick": s.quick,
         "runs": len(got),
