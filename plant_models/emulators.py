@@ -171,7 +171,7 @@ class _World:
         self.spike = 0.0
         self.nan_next = False
         self.outputs = self.plant.initial_outputs()
-        self.hand = {"F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3)}
+        self.hand = {"F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3), "F_tip_B": np.zeros(3)}
 
     def truth(self) -> dict[str, Any]:
         """What a perfect calibration would find: the tool and the FT-150's offset."""
@@ -278,7 +278,12 @@ class _World:
         self.outputs = self.plant.step(
             t,
             WORLD_DT,
-            {"twist_cmd_B": twist, "F_hand_B": hand["F_hand_B"], "tau_hand_B": hand["tau_hand_B"]},
+            {
+                "twist_cmd_B": twist,
+                "F_hand_B": hand["F_hand_B"],
+                "tau_hand_B": hand["tau_hand_B"],
+                "F_tip_B": hand["F_tip_B"],
+            },
         )
         before = self.ft.clock.delivered
         ft = self.ft.step(t, WORLD_DT, {"wrench_S_true": self.outputs["wrench_S"]})

@@ -22,9 +22,16 @@ Figures (ours, from the literature's ranges):
 
 Tasks: `off` (no hand on the handle), `hold` (keep the tip where it was), `circle`, `line` (a line
 scan, back and forth), `press` (press to a target contact force and hold), `scan` (press and line scan
-together), `push_release` (push with a constant force, then let go). Every task starts at `start_s`;
-before that the hand is off (so the estimator can rebias), and the tip position then is the task's
-origin.
+together), `push_release` (push with a constant force, then let go), `probe_push` (the hand off the
+handle presses the probe tip directly: the seed's way of collecting probe-sensor data, Fig. 6 and 14).
+Every task starts at `start_s`; before that the hand is off (so the estimator can rebias), and the tip
+position then is the task's origin. With `probe_check_s` > 0 the hand presses the probe tip for that
+long before the task starts (the estimator's probe check).
+
+Probe pushes: one every `push_s` seconds, each a raised-cosine rise and fall of the force to a peak
+drawn uniformly in [`push_min_N`, `push_max_N`], along a direction drawn uniformly within
+`push_cone_deg` of the direction a surface would push the tip (-`press_direction_B`). The draws come
+from the scenario's seed, in order, so they do not depend on the step size.
 """
 
 from __future__ import annotations
@@ -43,13 +50,15 @@ from hoh_cosim.errors import ConfigError
 
 __all__ = ["PLANES", "TASKS", "Operator", "OperatorParams"]
 
-TASKS = ("off", "hold", "circle", "line", "press", "scan", "push_release")
+TASKS = ("off", "hold", "circle", "line", "press", "scan", "push_release", "probe_push")
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
 
 @dataclass(frozen=True)
 class OperatorParams:
-    task: Literal["off", "hold", "circle", "line", "press", "scan", "push_release"] = "circle"
+    task: Literal[
+        "off", "hold", "circle", "line", "press", "scan", "push_release", "probe_push"
+    ] = "circle"
     start_s: float = 0.0  # [s] the hand takes the handle
     # circle: radius and period, in a plane of the base frame; the speed ramps up over ramp_s
     radius_m: float = 0.04
@@ -69,6 +78,12 @@ class OperatorParams:
     # push then release
     push_force_B: Vec3 = field(default_factory=lambda: frozen([5.0, 0.0, 0.0]))  # [N]
     release_s: float = 3.0  # [s]
+    # pushes on the probe tip, hand off the handle (task probe_push, or before any task)
+    probe_check_s: float = 0.0  # [s] before start_s
+    push_s: float = 2.0  # [s] per push
+    push_min_N: float = 2.0
+    push_max_N: float = 15.0
+    push_cone_deg: float = 60.0
     # the human
     stiffness: float = 300.0  # K [N/m]
     damping: float = 20.0  # D [N·s/m]
@@ -91,6 +106,11 @@ class OperatorParams:
         "contact_threshold_N": "N",
         "push_force_B": "N",
         "release_s": "s",
+        "probe_check_s": "s",
+        "push_s": "s",
+        "push_min_N": "N",
+        "push_max_N": "N",
+        "push_cone_deg": "deg",
         "stiffness": "N/m",
         "damping": "N.s/m",
         "reaction_delay_s": "s",
@@ -123,9 +143,11 @@ class OperatorParams:
             "target_force_N",
             "approach_force_N",
             "contact_threshold_N",
+            "probe_check_s",
+            "push_min_N",
         ):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
-        for name in ("radius_m", "period_s", "length_m", "stiffness", "max_force_N"):
+        for name in ("radius_m", "period_s", "length_m", "stiffness", "max_force_N", "push_s"):
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
@@ -135,6 +157,14 @@ class OperatorParams:
             self, "press_direction_B", as_unit_vector(self.press_direction_B, "press_direction_B")
         )
         object.__setattr__(self, "push_force_B", as_vector(self.push_force_B, 3, "push_force_B"))
+        object.__setattr__(
+            self, "push_max_N", as_scalar(self.push_max_N, "push_max_N", low=self.push_min_N)
+        )
+        object.__setattr__(
+            self,
+            "push_cone_deg",
+            as_scalar(self.push_cone_deg, "push_cone_deg", low=0.0, high=180.0),
+        )
 
 
 class Operator:
@@ -150,10 +180,15 @@ class Operator:
         Port("tau_hand_B", 3, "N.m", "torque of the hand on the handle, in B"),
         Port("p_ref_B", 3, "m", "where the hand wants the probe tip"),
         Port("hand_on", 1, "1", "1 while the hand pushes the handle, else 0"),
+        Port("F_tip_B", 3, "N", "force of the hand directly on the probe tip, in B"),
     )
 
-    def __init__(self, params: OperatorParams | None = None) -> None:
+    def __init__(
+        self, params: OperatorParams | None = None, rng: np.random.Generator | None = None
+    ) -> None:
         self.params = params or OperatorParams()
+        rng = rng if rng is not None else np.random.default_rng(0)
+        self._push_seed = int(rng.integers(2**63))
         self.reset()
 
     def retune(self, params: OperatorParams) -> None:
@@ -166,6 +201,8 @@ class Operator:
         self._origin: Vec | None = None
         self._integral = 0.0
         self._touched = False
+        self._push_rng = np.random.default_rng(self._push_seed)
+        self._pushes: list[tuple[float, Vec3]] = []  # (peak [N], unit direction), drawn in order
 
     def _perceived(self, dt: float, now: tuple[Vec, Vec, Vec]) -> tuple[Vec, Vec, Vec]:
         """The tip position, velocity and contact force as they were a reaction delay ago."""
@@ -207,7 +244,12 @@ class Operator:
             dt, (p_now.copy(), inputs["twist_B"][:3].copy(), inputs["F_contact_B"].copy())
         )
         t_end = t + dt
-        if p.task == "off" or p.released or t_end < p.start_s:
+        if p.task == "probe_push" and t_end >= p.start_s:
+            return self._out(np.zeros(3), p_now, on=False, tip=self.tip_push(t_end - p.start_s))
+        if p.probe_check_s > 0.0 and p.start_s - p.probe_check_s <= t_end < p.start_s:
+            tip = self.tip_push(t_end - (p.start_s - p.probe_check_s))
+            return self._out(np.zeros(3), p_now, on=False, tip=tip)
+        if p.task in ("off", "probe_push") or p.released or t_end < p.start_s:
             return self._out(np.zeros(3), p_now, on=False)
         if self._origin is None:
             self._origin = p_now.copy()
@@ -244,16 +286,36 @@ class Operator:
             self._integral += p.force_ki * error * dt
         return min(max(push, -limit), limit)
 
+    def tip_push(self, tau: float) -> Vec3:
+        """The force on the probe tip `tau` seconds into the pushes (module docstring)."""
+        p = self.params
+        k, phase = divmod(tau / p.push_s, 1.0)
+        while len(self._pushes) <= k:
+            rng = self._push_rng
+            peak = float(rng.uniform(p.push_min_N, p.push_max_N))
+            cos_cone = math.cos(math.radians(p.push_cone_deg))
+            c = float(rng.uniform(cos_cone, 1.0))
+            phi = float(rng.uniform(0.0, 2.0 * math.pi))
+            axis = -p.press_direction_B
+            u1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+            u1 /= np.linalg.norm(u1)
+            u2 = np.cross(axis, u1)
+            s = math.sqrt(max(0.0, 1.0 - c * c))
+            self._pushes.append((peak, c * axis + s * (math.cos(phi) * u1 + math.sin(phi) * u2)))
+        peak, direction = self._pushes[int(k)]
+        return peak * 0.5 * (1.0 - math.cos(2.0 * math.pi * phase)) * direction
+
     def _saturate(self, F: Vec3) -> Vec3:
         n = math.sqrt(float(F @ F))
         limit = self.params.max_force_N
         return F * (limit / n) if n > limit else F
 
     @staticmethod
-    def _out(F: Vec3, p_ref: Vec3, on: bool) -> dict[str, Vec]:
+    def _out(F: Vec3, p_ref: Vec3, on: bool, tip: Vec3 | None = None) -> dict[str, Vec]:
         return {
             "F_hand_B": F,
             "tau_hand_B": np.zeros(3),
             "p_ref_B": np.array(p_ref, dtype=float),
             "hand_on": np.array([1.0 if on else 0.0]),
+            "F_tip_B": np.zeros(3) if tip is None else tip,
         }

@@ -1,6 +1,7 @@
 """The plant block: the UR5 under speedL, the probe and its housing, and the phantom.
 
-Inputs: the speedL twist command and the operator's wrench on the handle. Outputs: what the robot
+Inputs: the speedL twist command, the operator's wrench on the handle and a push directly on the
+probe tip (how the seed collected its probe-sensor data, Fig. 6 and 14). Outputs: what the robot
 reports (TCP pose and twist, joint positions), the wrist sensor's pose, and the ideal readings of both
 force sensors plus the contact force itself (the sensor blocks add their imperfections).
 
@@ -50,6 +51,9 @@ class Plant:
         Port("twist_cmd_B", 6, _TWIST_UNITS, "speedL command: TCP twist [v; ω] in the base frame"),
         Port("F_hand_B", 3, "N", "force of the hand on the handle, in B"),
         Port("tau_hand_B", 3, "N.m", "torque of the hand on the handle (about the handle), in B"),
+        Port(
+            "F_tip_B", 3, "N", "force of a hand directly on the probe tip (below its sensor), in B"
+        ),
     )
     outputs: ClassVar[tuple[Port, ...]] = (
         Port("p_BT_B", 3, "m", "TCP (probe tip) position in the base frame"),
@@ -79,7 +83,7 @@ class Plant:
     def reset(self) -> None:
         self.arm.reset()
         self._cycle = -1
-        self._outputs = self._evaluate(np.zeros(3), np.zeros(3))
+        self._outputs = self._evaluate(np.zeros(3), np.zeros(3), np.zeros(3))
 
     def retune(self, params: PlantParams) -> None:
         """New parameters while running (only the phantom may change)."""
@@ -95,7 +99,7 @@ class Plant:
             self._cycle = cycle
             self.arm.cycle(inputs["twist_cmd_B"])
         self.arm.advance(dt)
-        self._outputs = self._evaluate(inputs["F_hand_B"], inputs["tau_hand_B"])
+        self._outputs = self._evaluate(inputs["F_hand_B"], inputs["tau_hand_B"], inputs["F_tip_B"])
         return self._outputs
 
     @property
@@ -103,7 +107,7 @@ class Plant:
         """The outputs at the current time (after reset: at t = 0), without stepping."""
         return self._outputs
 
-    def _evaluate(self, F_hand_B: Vec3, tau_hand_B: Vec3) -> dict[str, Vec]:
+    def _evaluate(self, F_hand_B: Vec3, tau_hand_B: Vec3, F_tip_B: Vec3) -> dict[str, Vec]:
         p = self.params
         m = self.model
         arm = self.arm
@@ -116,8 +120,17 @@ class Plant:
         omega = twist[3:]
         p_BK = p_BS + R_BS @ p.tool.cable.p_SK_S if p.tool.cable.enabled else None
         a_P = m.acceleration("probe_sensor")[:3] if p.tool.probe_mass_kg > 0.0 else None
+        # a push on the tip loads both sensors as a contact does
         wrench_S, force_P = self._loads.readings(
-            R_BS, acc_C[:3], omega, acc_C[3:], F_hand_B, tau_hand_B, contact.force_B, p_BK, a_P
+            R_BS,
+            acc_C[:3],
+            omega,
+            acc_C[3:],
+            F_hand_B,
+            tau_hand_B,
+            contact.force_B + F_tip_B,
+            p_BK,
+            a_P,
         )
         return {
             "p_BT_B": p_BT,

@@ -114,7 +114,7 @@ def test_model_description_matches_block(fmus: dict[str, Path], kind: str) -> No
             assert str(variable.start).lower() == str(leaf.value).lower(), name
 
 
-@pytest.mark.parametrize("kind", ["ft150", "fse103"])
+@pytest.mark.parametrize("kind", ["ft150", "fse103", "operator"])
 def test_random_block_has_integer_seed(fmus: dict[str, Path], kind: str) -> None:
     assert KINDS[kind].random
     md = read_model_description(str(fmus[kind]))
@@ -123,7 +123,7 @@ def test_random_block_has_integer_seed(fmus: dict[str, Path], kind: str) -> None
 
 
 def test_deterministic_blocks_have_no_seed(fmus: dict[str, Path]) -> None:
-    for kind in ("operator", "plant", "estimator", "controller", "sequencer"):
+    for kind in ("plant", "estimator", "controller", "sequencer"):
         md = read_model_description(str(fmus[kind]))
         assert "seed" not in {v.name for v in md.modelVariables}, kind
 
@@ -244,7 +244,7 @@ def test_fmpy_simulation_equals_block_in_process(fmus: dict[str, Path], kind: st
 def test_operator_and_ft150_outputs_move(fmus: dict[str, Path]) -> None:
     """The equality above is not two zeros agreeing: the operator pushes, the FT-150 delivers."""
     operator = _in_process("operator", START_VALUES["operator"], 50)
-    assert operator[-1, -1] == 1.0  # hand_on
+    assert operator[-1, 9] == 1.0  # hand_on (after F_hand_B, tau_hand_B, p_ref_B)
     assert np.linalg.norm(operator[-1, :3]) > 0.1  # F_hand_B
     ft150 = _in_process("ft150", START_VALUES["ft150"], 50)
     assert ft150[-1, -1] >= 5.0  # packets delivered

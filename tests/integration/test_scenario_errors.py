@@ -319,13 +319,13 @@ BAD_SCENARIOS = [
     ),
     pytest.param(
         append_connection("plant.p_BT_B", "controller.p_BT_B"),
-        "connections[20].to",
+        "connections[21].to",
         ["controller.p_BT_B is already fed by connections[19]"],
         id="input-fed-twice",
     ),
     pytest.param(
         append_connection("plant.twist_B[1]", "plant.twist_cmd_B[6]"),
-        "connections[20].to",
+        "connections[21].to",
         ["plant.twist_cmd_B[6] is already fed by connections[2]"],
         id="input-element-fed-twice",
     ),
@@ -477,7 +477,7 @@ BAD_SCENARIOS = [
         "metrics",
         [
             "expected one of none, circles, static_noise, gravity_calibration, contact_scan, "
-            "release, teleecho, got 'bogus'"
+            "release, teleecho, probe_data, got 'bogus'"
         ],
         id="metrics-unknown-set",
     ),

@@ -51,6 +51,7 @@ def run_loop(
                 "twist_cmd_B": command,
                 "F_hand_B": hand["F_hand_B"],
                 "tau_hand_B": hand["tau_hand_B"],
+                "F_tip_B": hand["F_tip_B"],
             },
         )
         ft_out = ft.step(t, DT, {"wrench_S_true": world["wrench_S"]})

@@ -83,7 +83,12 @@ def test_the_wrist_feels_the_arm_accelerate():
         out = plant.step(
             k * 1e-3,
             1e-3,
-            {"twist_cmd_B": np.array([0.1, 0, 0, 0, 0, 0]), "F_hand_B": Z3, "tau_hand_B": Z3},
+            {
+                "twist_cmd_B": np.array([0.1, 0, 0, 0, 0, 0]),
+                "F_hand_B": Z3,
+                "tau_hand_B": Z3,
+                "F_tip_B": Z3,
+            },
         )
     felt_B = R_BS_EQ1 @ (out["wrench_S"][:3] - still[:3])
     np.testing.assert_allclose(felt_B, [-TOOL.mass_kg * 1.0, 0, 0], atol=0.01)

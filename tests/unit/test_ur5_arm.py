@@ -81,7 +81,7 @@ def test_frame_twist_is_the_derivative_of_its_position(rng):
 
 def run_arm(params: ArmParams, command, seconds: float, dt: float = 1e-3):
     plant = Plant(PlantParams(arm=params))
-    inputs = {"F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3)}
+    inputs = {"F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3), "F_tip_B": np.zeros(3)}
     rows = []
     for k in range(round(seconds / dt)):
         t = k * dt
@@ -114,7 +114,14 @@ def test_commands_are_taken_only_at_the_robot_rate(rate):
     for k in range(round(0.1 / 1e-3)):
         cmd = np.array([0.001 * k, 0, 0, 0, 0, 0])  # a new command every tick
         plant.step(
-            k * 1e-3, 1e-3, {"twist_cmd_B": cmd, "F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3)}
+            k * 1e-3,
+            1e-3,
+            {
+                "twist_cmd_B": cmd,
+                "F_hand_B": np.zeros(3),
+                "tau_hand_B": np.zeros(3),
+                "F_tip_B": np.zeros(3),
+            },
         )
         seen.append(plant.arm.active[0])
     changes = [k for k in range(1, len(seen)) if seen[k] != seen[k - 1]]
