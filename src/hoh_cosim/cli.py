@@ -31,7 +31,16 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
-SUBCOMMANDS = ("build-fmus", "identify-gravity", "hw", "replay", "sweep", "report", "tune")
+SUBCOMMANDS = (
+    "build-fmus",
+    "identify-gravity",
+    "hw",
+    "replay",
+    "sweep",
+    "report",
+    "tune",
+    "probe-correction",
+)
 
 
 class _ArgumentParser(argparse.ArgumentParser):

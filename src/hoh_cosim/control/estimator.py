@@ -17,6 +17,12 @@ Seed 000, Fig. 5, per tick:
   with the axes relabelled, and ours stays right when the sensor turns.
 - Alignment (3.C): the estimates are turned into the base frame with the current R_BS, and
   R_BP = R_BS · R_SP for the probe sensor.
+- Probe correction (`hoh_cosim.control.probe_correction`): each rebiased probe packet goes through
+  the correction `probe_correction.kind` names before its filter. With `probe_correction.check_s` > 0
+  the rebias is followed by the probe check: for that long the outputs stay zero and `ready` 0 (the
+  controller holds the robot still), the hand is off the handle, someone presses the probe tip, and
+  each probe packet is paired with the latest compensated wrist packet (the reference) for the
+  online map. Once ready, the consistency check compares the two sensors across the probe's axis.
 
 Sign convention: each sensor reports the wrench that the tool side puts on it. The wrist sensor then
 reads hand + contact + weight, the probe sensor contact (+ the probe's weight if it hangs below it), so
@@ -43,6 +49,11 @@ from hoh_cosim.control.block import WRENCH_UNITS, Port
 from hoh_cosim.control.frames import R_BS_EQ1, R_SP_SEED
 from hoh_cosim.control.gravity import SEED_TOOL, GravityModel, ToolParams
 from hoh_cosim.control.kalman import KalmanBank, KalmanParams, SteadyStateForceKalman
+from hoh_cosim.control.probe_correction import (
+    ContactConsistency,
+    ProbeCorrection,
+    ProbeCorrectionParams,
+)
 from hoh_cosim.control.vectors import (
     GRAVITY_B,
     Rot3,
@@ -161,6 +172,7 @@ class EstimatorParams:
     )
     ft_packet_period_s: float = 0.005  # [s] expected, for the steady-state Kalman gain
     probe_packet_period_s: float = 0.02  # [s] expected (FSE103 at 50 Hz)
+    probe_correction: ProbeCorrectionParams = field(default_factory=ProbeCorrectionParams)
 
     def __post_init__(self) -> None:
         if self.filter not in FILTER_KINDS:
@@ -313,8 +325,15 @@ class Estimator:
         Port("F_hand_meas_B", 3, _F, "latest compensated, unfiltered wrist force, in B (held)"),
         Port("ft_age", 1, "s", "time since the last accepted FT-150 packet"),
         Port("probe_age", 1, "s", "time since the last accepted FSE103 packet"),
-        Port("ready", 1, "1", "1 once both sensors are rebiased, else 0"),
+        Port("ready", 1, "1", "1 once both sensors are rebiased and the probe check is over"),
         Port("rejected_packets", 1, "1", "packets rejected for NaN or infinite values"),
+        Port("F_probe_meas_P", 3, _F, "latest rebiased probe packet, uncorrected, in P (held)"),
+        Port("F_probe_corr_P", 3, _F, "the same packet corrected, in P (held)"),
+        Port("probe_check", 1, "1", "1 during the probe check (hand off, probe tip pressed)"),
+        Port(
+            "probe_mismatch", 1, "N", "low-passed disagreement of the two sensors across the axis"
+        ),
+        Port("probe_drift", 1, "1", "1 while the mismatch is above its threshold"),
     )
 
     def __init__(self, params: EstimatorParams | None = None) -> None:
@@ -329,43 +348,71 @@ class Estimator:
             "probe_counter", "force_P", p.probe_rebias_packets, p.probe_bias
         )
         self._shift_torque = bool(np.any(p.p_SR_S != 0.0))
+        self._R_PS = p.R_SP.T.copy()
+        self.correction = ProbeCorrection(p.probe_correction)
+        self._consistency = ContactConsistency(p.probe_correction, p.p_SR_S)
         self.reset()
 
     def reset(self) -> None:
         self._filters.reset()
         self._ft.reset()
         self._probe.reset()
+        self.correction.reset()
+        self._consistency.reset()
         self._t0: float | None = None
         self._F_meas_S = np.zeros(3)
+        self._m_P = np.zeros(3)
+        self._f_P = np.zeros(3)
+        self._check_until: float | None = None
+        self._checking = False
         self._update_ready()
 
     def start_rebias(self) -> None:
-        """Take the next N packets of each sensor as the new offset (nobody may touch the tool)."""
+        """Take the next N packets of each sensor as the new offset (nobody may touch the tool);
+        the probe check, if any, follows again."""
         self._ft.restart_rebias()
         self._probe.restart_rebias()
         self._filters.reset()
+        self._consistency.reset()
+        self._check_until = None
         self._update_ready()
 
     @property
     def ready(self) -> bool:
-        """Both sensors rebiased (or the probe sensor not in use)."""
+        """Both sensors rebiased (or the probe sensor not in use) and the probe check over."""
         return self._ready
+
+    @property
+    def checking(self) -> bool:
+        """In the probe check: the hand must be off the handle, the probe tip pressed."""
+        return self._checking
 
     @property
     def rejected_packets(self) -> int:
         """Packets refused for a NaN or an infinity, both sensors together."""
         return self._ft.rejected + self._probe.rejected
 
-    def _update_ready(self) -> None:
-        self._ready = self._ft.bias is not None and (
+    def _update_ready(self, t: float | None = None) -> None:
+        """Ready once rebiased and the probe check, which starts at the first step after the
+        rebias (time t), is over."""
+        rebiased = self._ft.bias is not None and (
             self._probe.bias is not None or not self.params.use_probe
         )
+        check_s = self.params.probe_correction.check_s if self.params.use_probe else 0.0
+        if rebiased and t is not None and self._check_until is None:
+            self._check_until = t + check_s
+        if not rebiased or check_s == 0.0:
+            self._checking = False
+        elif self._check_until is None or t is None:
+            self._checking = True
+        else:
+            self._checking = t < self._check_until - 1e-9
+        self._ready = rebiased and not self._checking
 
     def _ft_packet(self, w: Wrench, R_BS: Rot3) -> Wrench | None:
         """The compensated wrench of a new FT-150 packet, or None while rebiasing."""
         ext = self._ft.debiased(w - self._weight.weight_S(R_BS))
         if ext is None:
-            self._update_ready()
             return None
         if self._shift_torque:  # τ about R = τ about S - p_SR × f
             p, f = self.params.p_SR_S, ext
@@ -380,10 +427,7 @@ class Estimator:
         """The compensated force of a new FSE103 packet, or None while rebiasing."""
         if self._probe_weight is not None:
             f = f - self._probe_weight.weight_S(R_BS @ self.params.R_SP)[:3]
-        ext = self._probe.debiased(f)
-        if ext is None:
-            self._update_ready()
-        return ext
+        return self._probe.debiased(f)
 
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         if self._t0 is None:
@@ -392,6 +436,8 @@ class Estimator:
 
         w = self._ft.new_packet(t, inputs)
         ft_z = None if w is None else self._ft_packet(w, R_BS)
+        if ft_z is not None:
+            self._F_meas_S = ft_z[:3]
         probe_z = None
         if self.params.use_probe:
             f = self._probe.new_packet(t, inputs)
@@ -400,17 +446,30 @@ class Estimator:
         else:
             probe_age = 0.0
         ft_age = t - (self._t0 if self._ft.t_last is None else self._ft.t_last)
+        if not self._ready:
+            self._update_ready(t)
+        if probe_z is not None:
+            self._m_P = probe_z
+            # corrected before it is learnt from: the output is the prediction, never the reference
+            probe_z = self._f_P = self.correction.correct(probe_z)
+            if self._checking:
+                self.correction.reference(t, self._m_P, self._R_PS @ self._F_meas_S)
 
+        mismatch = 0.0
         if self._ready:
             if ft_z is not None:
-                self._F_meas_S = ft_z[:3]
                 measurements = (ft_z[:3], ft_z[3:], probe_z)
             else:
                 measurements = (None, None, probe_z)
             F_S, tau_S, F_P = self._filters.step_bank(dt, measurements).reshape(3, 3)
+            F_probe_S = self.params.R_SP @ F_P
+            if self.params.use_probe:
+                if ft_z is not None:
+                    self._consistency.step(t, F_S, tau_S, F_probe_S)
+                mismatch = self._consistency.mismatch
             # one product turns all four vectors into B: columns F_hand, τ_hand, F_probe, F_meas
             # as rows: v_B = R_BS v_S  <=>  row_B = row_S R_BSᵀ
-            in_S = np.array([F_S, tau_S, self.params.R_SP @ F_P, self._F_meas_S])
+            in_S = np.array([F_S, tau_S, F_probe_S, self._F_meas_S])
             F_hand_B, tau_hand_B, F_probe_B, F_meas_B = in_S @ R_BS.T
             if not self.params.use_probe:
                 F_probe_B = np.zeros(3)
@@ -422,6 +481,7 @@ class Estimator:
             F_meas_B = R_BS @ self._F_meas_S
             ready = 0.0
 
+        threshold = self.params.probe_correction.mismatch_threshold_N
         return {
             "F_hand_B": F_hand_B,
             "tau_hand_B": tau_hand_B,
@@ -431,4 +491,9 @@ class Estimator:
             "probe_age": np.array([probe_age]),
             "ready": np.array([ready]),
             "rejected_packets": np.array([float(self.rejected_packets)]),
+            "F_probe_meas_P": self._m_P.copy(),
+            "F_probe_corr_P": self._f_P.copy(),
+            "probe_check": np.array([1.0 if self._checking else 0.0]),
+            "probe_mismatch": np.array([mismatch]),
+            "probe_drift": np.array([1.0 if mismatch > threshold else 0.0]),
         }

@@ -276,6 +276,45 @@ def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> dict[str, b
     return images
 
 
+def probe_forces_figure(
+    t: np.ndarray, reference: np.ndarray, curves: dict[str, np.ndarray], title: str
+):
+    """Per axis of the probe sensor's frame, the wrist's reference and the probe's readings (the
+    seed's Fig. 6, 14 and 15: blue the wrist, red the raw probe, gold the network)."""
+    colours = {"raw": "tab:red", "network": "goldenrod", "online": "tab:green"}
+    colours["corrected"] = colours["online"]
+    plt = pyplot()
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+    for j, ax in enumerate(axes):
+        ax.plot(t, reference[:, j], color="tab:blue", lw=1.2, label="wrist (reference)")
+        for label, values in curves.items():
+            ax.plot(t, values[:, j], color=colours.get(label), lw=0.9, label=label)
+        ax.set_ylabel(f"F_{'xyz'[j]} in P [N]")
+    axes[0].legend(loc="upper right", fontsize=8, ncol=len(curves) + 1)
+    axes[0].set_title(title)
+    axes[-1].set_xlabel("time [s]")
+    fig.tight_layout()
+    return fig
+
+
+def _probe_data(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    s = report.data.get("probe_samples")
+    if s is None or len(s.t) == 0:
+        return {}
+    fig = probe_forces_figure(
+        s.t,
+        s.reference,
+        {"raw": s.m, "corrected": s.corrected},
+        f"probe pushes: RMS error raw {_fmt_axes(report.metrics.get('probe_raw_rms_N'))}, "
+        f"corrected {_fmt_axes(report.metrics.get('probe_corrected_rms_N'))}",
+    )
+    return {"probe_forces.png": png(fig)}
+
+
+def _fmt_axes(values: list[float] | None) -> str:
+    return "n/a" if values is None else "/".join(f"{v:.2f}" for v in values) + " N"
+
+
 def _fmt(value: float | None, scale: float, unit: str) -> str:
     return "n/a" if value is None else f"{scale * value:.3g} {unit}"
 
@@ -287,6 +326,7 @@ _PLOTS: dict[str, Callable[[Scenario, Recording, Report], dict[str, bytes]]] = {
     "contact_scan": _contact_scan,
     "release": _release,
     "teleecho": _teleecho,
+    "probe_data": _probe_data,
 }
 
 

@@ -37,6 +37,13 @@ parameters (the truth the simulation knows); none is a constant. A metric that t
   `contact_force_mean_N` and `contact_force_std_N` of the phantom's force along the surface normal;
   from the start of the run, `orientation_error_max_rad` the largest angle between the tip's
   orientation and its start orientation (the reference); from the first touch, `contact_losses`.
+- probe_data (seed 000, 3.B.2, 4.A, Fig. 6 and 14): forces pushed on the probe tip with the hand off
+  the handle during the estimator's probe check, one sample per probe packet: the rebiased reading m
+  and the compensated wrist force (the reference), both in the probe sensor's frame P.
+  `probe_samples`; per axis of P the correlation coefficient and the RMS error against the reference
+  of the raw reading (`probe_raw_correlation`, `probe_raw_rms_N`) and of the estimator's correction
+  (`probe_corrected_correlation`, `probe_corrected_rms_N`; for the online map its prediction before it
+  learns from the sample), and `probe_corrected_rms_late_N` over the second half of the samples.
 - with a controller: `controller_flags`, what its limits did once the estimator was ready ("ok" if
   nothing), and `controller_stop_s`, how long it commanded a stop then.
 - every run: `realtime_factor` (simulated / wall-clock seconds) and `wall_s`.
@@ -295,6 +302,83 @@ def _contact_scan(scenario: Scenario, rec: Recording, report: Report) -> None:
     m["max_bounce_m"] = float(max(0.0, -np.min(depth[first:])))
 
 
+@dataclass(frozen=True)
+class ProbeSamples:
+    """One row per probe packet the estimator took during its probe check (all in P)."""
+
+    t: np.ndarray  # (n,) [s]
+    m: np.ndarray  # (n, 3) rebiased reading [N]
+    corrected: np.ndarray  # (n, 3) the estimator's correction of it [N]
+    reference: np.ndarray  # (n, 3) the compensated wrist force [N]
+
+
+def probe_samples(scenario: Scenario, rec: Recording) -> ProbeSamples:
+    """The probe check's samples: the rows where the probe sensor's counter moved while the
+    estimator was checking (it steps after the sensor, every tick: it sees the packet that row)."""
+    est, probe, plant = (_component(scenario, k) for k in ("estimator", "fse103", "plant"))
+    counter = _signal(rec, probe, "counter")[:, 0]
+    new = np.zeros(len(counter), dtype=bool)
+    new[1:] = np.diff(counter) > 0
+    rows = np.flatnonzero(new & (_signal(rec, est, "probe_check")[:, 0] > 0.5))
+    R_BS = _signal(rec, plant, "R_BS")[rows].reshape(-1, 3, 3)
+    F_B = _signal(rec, est, "F_hand_meas_B")[rows]
+    # F_P = R_SPᵀ R_BSᵀ F_B, row by row
+    F_S = np.einsum("nji,nj->ni", R_BS, F_B)
+    reference = F_S @ est.params.R_SP
+    return ProbeSamples(
+        rec.time[rows],
+        _signal(rec, est, "F_probe_meas_P")[rows],
+        _signal(rec, est, "F_probe_corr_P")[rows],
+        reference,
+    )
+
+
+def axis_correlation(x: np.ndarray, y: np.ndarray) -> list[float | None]:
+    """Pearson's r per column of two (n, k) arrays; None for a column that does not vary."""
+    out: list[float | None] = []
+    for j in range(x.shape[1]):
+        a, b = x[:, j] - x[:, j].mean(), y[:, j] - y[:, j].mean()
+        den = math.sqrt(float(a @ a) * float(b @ b))
+        out.append(float(a @ b) / den if den > 0.0 else None)
+    return out
+
+
+def axis_rms(error: np.ndarray) -> list[float]:
+    return np.sqrt(np.mean(error**2, axis=0)).tolist()
+
+
+def _probe_data(scenario: Scenario, rec: Recording, report: Report) -> None:
+    est = _component(scenario, "estimator")
+    m = report.metrics
+    names = (
+        "probe_raw_correlation",
+        "probe_raw_rms_N",
+        "probe_corrected_correlation",
+        "probe_corrected_rms_N",
+        "probe_corrected_rms_late_N",
+    )
+    if est.every != 1:
+        report.notes.append(
+            f"probe_data: the estimator steps every {est.every} ticks: the packets cannot be matched"
+        )
+        m["probe_samples"] = 0
+        m.update(dict.fromkeys(names))
+        return
+    s = probe_samples(scenario, rec)
+    report.data["probe_samples"] = s
+    m["probe_samples"] = len(s.t)
+    if len(s.t) < 4:
+        report.notes.append("probe_data: fewer than 4 probe packets during the probe check")
+        m.update(dict.fromkeys(names))
+        return
+    m["probe_raw_correlation"] = axis_correlation(s.m, s.reference)
+    m["probe_raw_rms_N"] = axis_rms(s.m - s.reference)
+    m["probe_corrected_correlation"] = axis_correlation(s.corrected, s.reference)
+    m["probe_corrected_rms_N"] = axis_rms(s.corrected - s.reference)
+    half = len(s.t) // 2
+    m["probe_corrected_rms_late_N"] = axis_rms(s.corrected[half:] - s.reference[half:])
+
+
 def _release(scenario: Scenario, rec: Recording, report: Report) -> None:
     op, plant = (_component(scenario, k) for k in ("operator", "plant"))
     on = _signal(rec, op, "hand_on")[:, 0] > 0.5
@@ -389,6 +473,7 @@ _SETS: dict[str, Callable[[Scenario, Recording, Report], None]] = {
     "contact_scan": _contact_scan,
     "release": _release,
     "teleecho": _teleecho,
+    "probe_data": _probe_data,
 }
 
 

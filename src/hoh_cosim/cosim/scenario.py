@@ -64,6 +64,7 @@ METRIC_SETS: dict[str, tuple[str | tuple[str, ...], ...]] = {
     "contact_scan": ("operator", "plant"),
     "release": ("operator", "plant"),
     "teleecho": (("panda", "plant"), ("impedance", "ur5_impedance")),
+    "probe_data": ("estimator", "fse103", "plant"),
 }
 """Each metric set (see `hoh_cosim.cosim.report`) and the kinds of component it reads (a tuple:
 any one of those kinds)."""

@@ -3,6 +3,8 @@
     connect the robot and the streams, wait for samples
     rebias: hold still, average `rebias.samples` FT-150 samples (and every probe sample meanwhile),
             refuse if the robot moves or the mean disagrees with the gravity model
+    probe check (if `estimator.probe_correction.check_s` > 0): the loop runs, the estimator is not
+            ready and the robot holds still while someone presses the probe tip, hand off the handle
     loop at the robot's rate until stopped:
         wait for the cycle's start (Pacer), read the robot's state and the latest samples
         Estimator.step (predicts every cycle, corrects when a sample's counter moved)
@@ -328,6 +330,12 @@ class Runner:
                 self._log_parameters(estimator, controller, rebias)
                 self._hold(pacer)
                 self.announce(f"rebias done: {_rebias_text(rebias)}")
+                check_s = estimator.params.probe_correction.check_s if self.probe else 0.0
+                if check_s > 0.0:
+                    self.announce(
+                        f"probe check: hands off the handle; press the probe tip in several "
+                        f"directions for {check_s:g} s"
+                    )
                 cause, clean = self._loop(pacer, estimator, controller, seconds)
         except RunError as exc:
             cause = str(exc)
@@ -357,6 +365,8 @@ class Runner:
         zero3 = np.zeros(3)
         ft_counter, probe_counter = np.zeros(1), np.zeros(1)
         k = 0
+        checking = estimator.params.probe_correction.check_s > 0.0 and self.probe is not None
+        drifted = False
         overruns_before = pacer.overruns  # the rebias's own are not the loop's
         while n_max is None or k < n_max:
             if self.stop_requested.is_set():
@@ -388,6 +398,24 @@ class Runner:
             )
             out = controller.step(t, period, {**estimate, "p_BT_B": state.p_BT_B})
             status = Status(int(out["status"][0]))
+            if checking and not estimator.checking:
+                checking = False
+                text = _check_text(estimator)
+                self._event("probe check", text)
+                self.announce(f"probe check done: {text}")
+            if checking:  # not ready by design: the controller commands zero, the robot holds
+                status &= ~Status.NOT_READY
+            if (estimate["probe_drift"][0] > 0.5) != drifted:
+                drifted = not drifted
+                mismatch = float(estimate["probe_mismatch"][0])
+                text = (
+                    f"the probe sensor disagrees with the wrist sensor by {mismatch:.1f} N across "
+                    "the probe: recheck it"
+                    if drifted
+                    else f"the two sensors agree again ({mismatch:.1f} N)"
+                )
+                self._event("probe drift", text)
+                self.announce(f"warning: {text}" if drifted else text)
             cause = self._cause(status, estimate, ft, probe) or self._check_command(out["twist_B"])
             sent = np.zeros(6) if cause else out["twist_B"]
             if cause is None:
@@ -529,6 +557,13 @@ def _realtime_interpreter(
         sys.setswitchinterval(previous)
         gc.enable()
         gc.unfreeze()
+
+
+def _check_text(estimator: Estimator) -> str:
+    online = estimator.correction.online
+    if online is None:
+        return f"{estimator.params.probe_correction.kind} correction: nothing to identify"
+    return f"online map identified from {online.updates} probe samples"
 
 
 def _rebias_text(rebias: Rebias) -> str:

@@ -3,6 +3,7 @@
     hoh-cosim sweep SWEEP.yaml [--scheduler ADDRESS] [--workers N] [--out DIR] [--engine E]
     hoh-cosim report [--out DIR] [--quick] [--workers N] [--scheduler ADDRESS] [--scenarios DIR]
     hoh-cosim tune [--out DIR] [-n N] [--seed S] [--seeds 1,2,3] [--workers N] [--scheduler ADDRESS]
+    hoh-cosim probe-correction [--out DIR] [--seed S] [--engine E] [--workers N] [--quick]
 
 `--workers 0` runs everything serially in this process (no Dask).
 """
@@ -19,7 +20,7 @@ from hoh_cosim.errors import ConfigError
 
 __all__ = ["COMMANDS", "add_commands", "run_command"]
 
-COMMANDS = ("sweep", "report", "tune")
+COMMANDS = ("sweep", "report", "tune", "probe-correction")
 EXIT_OK, EXIT_FAILED = 0, 1
 
 
@@ -96,6 +97,29 @@ def add_commands(sub) -> None:
         "--scenarios", metavar="DIR", default="scenarios", help="default: ./scenarios"
     )
     _cluster_options(tune)
+
+    probe = sub.add_parser(
+        "probe-correction",
+        help="the seed's probe-force network against the online map, day one and day two",
+        description=(
+            "Record pushes on the probe tip on two simulated days, train the seed's networks on "
+            "day one, compare raw, network and online map against the wrist sensor on both days, "
+            "and run contact_scan_online with each correction in the loop; write report.md, "
+            "table.csv, summary.json, network.json and the figures."
+        ),
+    )
+    probe.add_argument(
+        "--out", metavar="DIR", default="probe_correction", help="default: probe_correction"
+    )
+    probe.add_argument("--seed", type=int, default=1, help="of the recordings (default 1)")
+    probe.add_argument(
+        "--engine", choices=("inprocess", "fmu"), default="inprocess", help="default: inprocess"
+    )
+    probe.add_argument("--quick", action="store_true", help="shorter recordings and runs")
+    probe.add_argument(
+        "--scenarios", metavar="DIR", default="scenarios", help="default: ./scenarios"
+    )
+    _cluster_options(probe)
 
 
 def _check_workers(args: argparse.Namespace) -> None:
@@ -225,7 +249,62 @@ def _tune(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _probe_correction(args: argparse.Namespace) -> int:
+    from hoh_cosim.study.probe import QUICK, ProbeSettings, run_probe_correction
+
+    _check_workers(args)
+    if args.seed < 0:
+        raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
+    study = run_probe_correction(
+        args.out,
+        args.scenarios,
+        seed=args.seed,
+        engine=args.engine,
+        settings=QUICK if args.quick else ProbeSettings(),
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+    )
+    s = study.summary
+    net = s["network"]
+
+    def axes(values: list) -> str:
+        return "/".join("n/a" if v is None else f"{v:.3f}" for v in values)
+
+    print(f"probe-correction: {s['training_samples']} training samples, {s['wall_s']:.0f} s")
+    print(
+        f"  network validation r {axes(net['validation_correlation'])} "
+        f"(seed {axes(net['seed_validation_correlation'])})"
+    )
+    print(f"  {'':8} {'':8} {'correlation x/y/z':>20} {'RMS error x/y/z [N]':>20}")
+    for row in study.table:
+        print(
+            f"  {row['day']:8} {row['correction']:8} {axes(row['correlation']):>20} "
+            f"{axes(row['rms_N']):>20}"
+        )
+    for row in study.contact:
+        if row["status"] != "ok":
+            print(f"  contact_scan {row['day']}, {row['correction']}: failed: {row['error']}")
+            continue
+        bounce = row["max_bounce_m"]
+        print(
+            f"  contact_scan {row['day']}, {row['correction']}: {row['contact_losses']} losses, "
+            f"force {_num(row['contact_force_mean_N'])} +- {_num(row['contact_force_std_N'])} N, "
+            f"bounce {_num(None if bounce is None else 1e3 * bounce)} mm, "
+            f"drift flagged {_num(row['drift_flagged_fraction'])}, {row['controller_flags']}"
+        )
+    print(f"wrote {study.out / 'report.md'}")
+    failed = [r for r in study.contact if r["status"] != "ok"]
+    return EXIT_FAILED if failed else EXIT_OK
+
+
+def _num(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.3g}"
+
+
 def run_command(args: argparse.Namespace) -> int | None:
+    if args.command == "probe-correction":
+        return _probe_correction(args)
     if args.command == "sweep":
         return _sweep(args)
     if args.command == "report":
