@@ -455,7 +455,7 @@ class Estimator:
             if self._checking:
                 self.correction.reference(t, self._m_P, self._R_PS @ self._F_meas_S)
 
-        mismatch = 0.0
+        mismatch, drift = 0.0, False
         if self._ready:
             if ft_z is not None:
                 measurements = (ft_z[:3], ft_z[3:], probe_z)
@@ -466,7 +466,7 @@ class Estimator:
             if self.params.use_probe:
                 if ft_z is not None:
                     self._consistency.step(t, F_S, tau_S, F_probe_S)
-                mismatch = self._consistency.mismatch
+                mismatch, drift = self._consistency.mismatch, self._consistency.drifted
             # one product turns all four vectors into B: columns F_hand, τ_hand, F_probe, F_meas
             # as rows: v_B = R_BS v_S  <=>  row_B = row_S R_BSᵀ
             in_S = np.array([F_S, tau_S, F_probe_S, self._F_meas_S])
@@ -481,7 +481,6 @@ class Estimator:
             F_meas_B = R_BS @ self._F_meas_S
             ready = 0.0
 
-        threshold = self.params.probe_correction.mismatch_threshold_N
         return {
             "F_hand_B": F_hand_B,
             "tau_hand_B": tau_hand_B,
@@ -491,9 +490,10 @@ class Estimator:
             "probe_age": np.array([probe_age]),
             "ready": np.array([ready]),
             "rejected_packets": np.array([float(self.rejected_packets)]),
-            "F_probe_meas_P": self._m_P.copy(),
-            "F_probe_corr_P": self._f_P.copy(),
+            # held: replaced, never written into, when a packet arrives
+            "F_probe_meas_P": self._m_P,
+            "F_probe_corr_P": self._f_P,
             "probe_check": np.array([1.0 if self._checking else 0.0]),
             "probe_mismatch": np.array([mismatch]),
-            "probe_drift": np.array([1.0 if mismatch > threshold else 0.0]),
+            "probe_drift": np.array([1.0 if drift else 0.0]),
         }

@@ -284,6 +284,8 @@ class ContactConsistency:
         self.params = params
         self._p_RH = np.asarray(params.handle_S) - p_SR_S
         self._p_RT = np.asarray(params.tip_S) - p_SR_S
+        self._axis = self._p_RT - self._p_RH
+        self._axis_sq = float(self._axis @ self._axis)
         self.reset()
 
     def reset(self) -> None:
@@ -300,8 +302,8 @@ class ContactConsistency:
 
     def step(self, t: float, F_S: Vec3, tau_R_S: Vec3, F_probe_S: Vec3) -> float:
         """Fold in the filtered wrist wrench and probe force at time t; returns the mismatch [N]."""
-        d = self._p_RT - self._p_RH
-        F_probe_across = F_probe_S - d * (float(F_probe_S @ d) / float(d @ d))
+        d = self._axis
+        F_probe_across = F_probe_S - d * (float(F_probe_S @ d) / self._axis_sq)
         difference = contact_across_axis(F_S, tau_R_S, self._p_RH, self._p_RT) - F_probe_across
         dt = 0.0 if self._t_last is None else t - self._t_last
         self._t_last = t

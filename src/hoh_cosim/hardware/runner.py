@@ -330,11 +330,10 @@ class Runner:
                 self._log_parameters(estimator, controller, rebias)
                 self._hold(pacer)
                 self.announce(f"rebias done: {_rebias_text(rebias)}")
-                check_s = estimator.params.probe_correction.check_s if self.probe else 0.0
-                if check_s > 0.0:
+                if estimator.checking and self.probe is not None:
                     self.announce(
-                        f"probe check: hands off the handle; press the probe tip in several "
-                        f"directions for {check_s:g} s"
+                        "probe check: hands off the handle; press the probe tip in several "
+                        f"directions for {estimator.params.probe_correction.check_s:g} s"
                     )
                 cause, clean = self._loop(pacer, estimator, controller, seconds)
         except RunError as exc:
@@ -365,7 +364,8 @@ class Runner:
         zero3 = np.zeros(3)
         ft_counter, probe_counter = np.zeros(1), np.zeros(1)
         k = 0
-        checking = estimator.params.probe_correction.check_s > 0.0 and self.probe is not None
+        # rebiased already: the check, if any, starts now
+        checking = estimator.checking and self.probe is not None
         drifted = False
         overruns_before = pacer.overruns  # the rebias's own are not the loop's
         while n_max is None or k < n_max:
