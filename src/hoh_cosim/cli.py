@@ -1,8 +1,10 @@
 """The `hoh-cosim` command: a thin layer over the library.
 
-    hoh-cosim SCENARIO.yaml [--out DIR] [--engine fmu|inprocess] [--duration S] [--seed N]
+    hoh-cosim SCENARIO.yaml [--out DIR] [--engine fmu|inprocess|libcosim|ecos] [--duration S]
+                            [--coupling gauss-seidel|jacobi|jacobi-eager] [--seed N]
                             [--set component.parameter=value ...]
     hoh-cosim build-fmus [--out DIR]
+    hoh-cosim export SCENARIO.yaml --out DIR [--duration S] [--seed N] [--set ...]
     hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
     hoh-cosim hw run|calibrate|sensors|rehearse ...   (see hoh_cosim.hardware.commands)
     hoh-cosim replay LOG.mcap [--set ...] [--out DIR]
@@ -14,6 +16,7 @@ Exit status: 0 done; 2 the input is wrong (one line naming the file and the plac
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -21,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from hoh_cosim import __version__
+from hoh_cosim.cosim.engines import COUPLINGS, ENGINES
 from hoh_cosim.errors import ConfigError, HohError, RunError
 from hoh_cosim.hardware.commands import add_commands as add_hardware_commands
 from hoh_cosim.hardware.commands import run_command as run_hardware_command
@@ -33,6 +37,7 @@ EXIT_BAD_INPUT = 2
 
 SUBCOMMANDS = (
     "build-fmus",
+    "export",
     "identify-gravity",
     "hw",
     "replay",
@@ -83,6 +88,30 @@ def _main_parser() -> argparse.ArgumentParser:
     )
     build.add_argument("--out", metavar="DIR", help="where to put the .fmu files")
 
+    export = sub.add_parser(
+        "export",
+        help="write a scenario's FMUs, an SSP archive and a README for another tool",
+        description=(
+            "Write the scenario's FMUs (validated), an SSP 1.0 archive of the system with its "
+            "connections and parameter values, the same system as OspSystemStructure.xml, and a "
+            "README with every variable and what a host needs."
+        ),
+    )
+    export.add_argument("scenario", metavar="SCENARIO.yaml")
+    export.add_argument("--out", required=True, metavar="DIR", help="the export directory")
+    export.add_argument(
+        "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
+    )
+    export.add_argument("--seed", type=int, metavar="N", help="seed instead of the scenario's")
+    export.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="C.P=V",
+        help="set a parameter, e.g. controller.contact_compensation=false (repeatable)",
+    )
+
     ident = sub.add_parser(
         "identify-gravity",
         help="identify the tool's mass, centre of mass and sensor offsets from static poses",
@@ -127,9 +156,21 @@ def _scenario_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--engine",
-        choices=("fmu", "inprocess"),
+        choices=ENGINES,
         default="fmu",
-        help="step the components as FMUs through fmpy (default) or as Python blocks in-process",
+        help=(
+            "step the components as FMUs through fmpy (default), as Python blocks in-process, or "
+            "as FMUs in libcosim or ecos"
+        ),
+    )
+    parser.add_argument(
+        "--coupling",
+        choices=COUPLINGS,
+        default="gauss-seidel",
+        help=(
+            "how our master passes outputs on: in the file's order (default), or as libcosim "
+            "(jacobi) or ecos (jacobi-eager) do"
+        ),
     )
     parser.add_argument(
         "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
@@ -165,6 +206,7 @@ def _run_scenario(argv: Sequence[str]) -> int:
         args.scenario,
         out=args.out,
         engine=args.engine,
+        coupling=args.coupling,
         duration_s=args.duration,
         seed=args.seed,
         overrides=args.overrides,
@@ -194,6 +236,25 @@ def _build_fmus(args: argparse.Namespace) -> int:
     paths = ensure_fmus(KINDS, out, force=args.out is not None)
     for kind, path in paths.items():
         print(f"{kind:<11} {path}")
+    return EXIT_OK
+
+
+def _export(args: argparse.Namespace) -> int:
+    from hoh_cosim.fmi.export import export_scenario
+
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
+    result = export_scenario(
+        args.scenario,
+        args.out,
+        overrides=args.overrides,
+        duration_s=args.duration,
+        seed=args.seed,
+        command=shlex.join(["hoh-cosim", "export", *args.argv]),
+    )
+    for component, path in result.fmus.items():
+        print(f"{component:<11} {path}")
+    print(f"wrote {result.ssp} and {result.out / 'README.md'}")
     return EXIT_OK
 
 
@@ -261,6 +322,9 @@ def _main(argv: list[str]) -> int:
             return _identify_gravity(args)
         if args.command == "build-fmus":
             return _build_fmus(args)
+        if args.command == "export":
+            args.argv = argv[1:]
+            return _export(args)
         status = run_hardware_command(args)
         if status is None:
             status = run_study_command(args)

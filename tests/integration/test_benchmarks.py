@@ -40,3 +40,17 @@ def test_cosim_speed_prints_its_figures_as_json():
     assert figures["trivial_fmus"] == 4
     for key in ("fmu_realtime_factor", "inprocess_realtime_factor", "master_us_per_step"):
         assert figures[key] > 0
+
+
+def test_engines_prints_each_engines_realtime_factor_as_json():
+    result = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "engines.py"), "--duration", "0.3", "--repeats", "1"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert figures["components"] == 6
+    for engine in ("fmu", "fmu_jacobi", "libcosim", "libcosim_recorded", "ecos", "ecos_recorded"):
+        assert figures[f"{engine}_realtime_factor"] > 0

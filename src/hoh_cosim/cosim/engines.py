@@ -40,14 +40,19 @@ from typing import Any, Protocol
 import numpy as np
 
 from hoh_cosim.control.block import make_block
+from hoh_cosim.cosim.external import EXTERNAL_ENGINES, simulate_external
 from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.fmi import exit_fix
 from hoh_cosim.params import leaves
 
-__all__ = ["ENGINES", "Recording", "simulate"]
+__all__ = ["COUPLINGS", "ENGINES", "Recording", "recording_layout", "simulate"]
 
-ENGINES = ("fmu", "inprocess")
+ENGINES = ("fmu", "inprocess", *EXTERNAL_ENGINES)
+# how an output reaches the inputs it is connected to (see `hoh_cosim.cosim.external`):
+# gauss-seidel: at once, in the file's order; jacobi: when the source's step ends (libcosim);
+# jacobi-eager: one tick after the source's step began, even if that step lasts several (ecos)
+COUPLINGS = ("gauss-seidel", "jacobi", "jacobi-eager")
 
 
 @dataclass
@@ -60,6 +65,7 @@ class Recording:
     element_names: dict[str, list[str]]  # "component.port" -> its CSV column names
     wall_s: float
     engine: str
+    coupling: str = "gauss-seidel"  # our master's; "jacobi" (libcosim), "jacobi-eager" (ecos)
 
     def __getitem__(self, signal: str) -> np.ndarray:
         """`component.port` as an (n + 1, size) array."""
@@ -82,6 +88,22 @@ class Runtime(Protocol):
 
 def _element_names(name: str, size: int) -> list[str]:
     return [name] if size == 1 else [f"{name}[{i + 1}]" for i in range(size)]
+
+
+def recording_layout(
+    components: Sequence[ComponentSpec],
+) -> tuple[dict[str, slice], dict[str, list[str]]]:
+    """The columns of a `Recording`: every output port of every component, in order."""
+    columns: dict[str, slice] = {}
+    names: dict[str, list[str]] = {}
+    offset = 0
+    for c in components:
+        for port in c.outputs:
+            key = f"{c.name}.{port.name}"
+            columns[key] = slice(offset, offset + port.size)
+            names[key] = [f"{c.name}.{n}" for n in _element_names(port.name, port.size)]
+            offset += port.size
+    return columns, names
 
 
 class InProcessRuntime:
@@ -359,10 +381,28 @@ def simulate(
     fmu_paths: dict[str, Path] | None = None,
     progress: bool = True,
     observer: Callable[[int, float], None] | None = None,
+    coupling: str = "gauss-seidel",
 ) -> Recording:
-    """Run `scenario` with `engine` ("fmu" or "inprocess") and record every output."""
+    """Run `scenario` with `engine` and record every output.
+
+    "fmu" and "inprocess" are our master, with `coupling` "gauss-seidel" (the file's order, the
+    default), "jacobi" or "jacobi-eager" (libcosim's and ecos's); "libcosim" and "ecos" run the
+    same FMUs in those engines (`hoh_cosim.cosim.external`), with their own coupling.
+    """
     if engine not in ENGINES:
         raise ConfigError(f"--engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
+    if coupling not in COUPLINGS:
+        raise ConfigError(f"--coupling: expected one of {', '.join(COUPLINGS)}, got {coupling!r}")
+    if engine in EXTERNAL_ENGINES:
+        if coupling != "gauss-seidel" or observer is not None:
+            raise ConfigError(
+                f"--engine {engine}: the engine has its own coupling and steps on its own"
+            )
+        bar = _Progress(scenario.name, scenario.duration_s, progress)
+        try:
+            return simulate_external(scenario, engine, fmu_paths=fmu_paths, progress=bar.update)
+        finally:
+            bar.close()
     components = list(scenario.components.values())
     runtimes: list[Runtime] = []
     try:
@@ -375,7 +415,7 @@ def simulate(
             runtimes = [FmuRuntime(c, c.fmu or fmu_paths[c.kind.name], log) for c in components]
         else:
             runtimes = [InProcessRuntime(c) for c in components]
-        return _run(scenario, engine, runtimes, progress, observer)
+        return _run(scenario, engine, runtimes, progress, observer, coupling)
     finally:
         for runtime in runtimes:
             runtime.close()
@@ -387,18 +427,11 @@ def _run(
     runtimes: list[Runtime],
     progress: bool,
     observer: Callable[[int, float], None] | None,
+    coupling: str,
 ) -> Recording:
     # one array for every output, then the constant input values
-    columns: dict[str, slice] = {}
-    names: dict[str, list[str]] = {}
-    offset = 0
-    for rt in runtimes:
-        for port in rt.spec.outputs:
-            key = f"{rt.spec.name}.{port.name}"
-            columns[key] = slice(offset, offset + port.size)
-            names[key] = [f"{rt.spec.name}.{n}" for n in _element_names(port.name, port.size)]
-            offset += port.size
-    n_outputs = offset
+    columns, names = recording_layout([rt.spec for rt in runtimes])
+    n_outputs = offset = sum(s.stop - s.start for s in columns.values())
     constants = [v for v in scenario.input_defaults.values()]
     n_const = sum(v.size for v in constants)
     store = np.zeros(n_outputs + n_const)
@@ -432,6 +465,13 @@ def _run(
 
     for rt in runtimes:
         rt.initialize()
+    # Jacobi: inputs come from `published`, and a component's outputs are published when its step
+    # has ended ("jacobi") or one tick after it began ("jacobi-eager"); Gauss-Seidel reads `store`,
+    # where they are the moment the component has stepped
+    jacobi = coupling != "gauss-seidel"
+    shift = 1 if coupling == "jacobi" else 0
+    published = store.copy() if jacobi else store
+    take = published.take
     n = scenario.n_ticks
     dt = scenario.dt_s
     values = np.empty((n + 1, n_outputs))
@@ -443,9 +483,12 @@ def _run(
         (rt, rt.spec.every, rt.spec.every * dt, gather[i], rt.in_buf)
         for i, rt in enumerate(runtimes)
     ]
+    spans = [
+        (rt.spec.every, columns[f"{rt.spec.name}.{rt.spec.outputs[0].name}"].start, rt.out.size)
+        for rt in runtimes
+    ]
     bar = _Progress(scenario.name, scenario.duration_s, progress)
     start = time.perf_counter()
-    take = store.take
     try:
         for k in range(n):
             t = k * dt
@@ -456,7 +499,13 @@ def _run(
                 if k % every == 0:
                     take(index, out=buf)
                     rt.step(t, step)
-            values[k + 1] = outputs
+            if jacobi:
+                for every, at, size in spans:
+                    if (k + shift) % every == 0:
+                        published[at : at + size] = store[at : at + size]
+                values[k + 1] = published[:n_outputs]
+            else:
+                values[k + 1] = outputs
             if observer is not None:
                 observer(k, t)
             if k % 1000 == 0:
@@ -473,4 +522,4 @@ def _run(
     timeline = np.arange(n + 1) * dt
     if not math.isfinite(wall):
         wall = float("nan")
-    return Recording(timeline, values, columns, names, wall, engine)
+    return Recording(timeline, values, columns, names, wall, engine, coupling)

@@ -451,7 +451,8 @@ def _controller_status(scenario: Scenario, rec: Recording, report: Report) -> No
     est = scenario.component_of_kind("estimator")
     if ctl is None:
         return
-    status = np.rint(_signal(rec, ctl, "status")[:, 0]).astype(int)
+    # a tick without values (libcosim shows none before its first step) raises no flag
+    status = np.rint(np.nan_to_num(_signal(rec, ctl, "status")[:, 0])).astype(int)
     if est is not None:
         ready = _signal(rec, est, "ready")[:, 0] > 0.5
         # the controller sees `ready` at its next cycle: skip that first cycle's "not ready"

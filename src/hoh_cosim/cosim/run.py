@@ -85,6 +85,7 @@ def summary_of(
             "file": str(scenario.path),
             "description": scenario.description,
             "engine": rec.engine,
+            "coupling": rec.coupling,
             "seed": scenario.seed,
             "duration_s": scenario.duration_s,
             "dt_s": scenario.dt_s,
@@ -165,6 +166,7 @@ def run_scenario(
     *,
     out: str | Path | None = None,
     engine: str = "fmu",
+    coupling: str = "gauss-seidel",
     duration_s: float | None = None,
     seed: int | None = None,
     overrides: Sequence[str] = (),
@@ -175,7 +177,7 @@ def run_scenario(
     scenario = load_scenario(path, overrides, duration_s, seed)
     out_dir = Path(out) if out is not None else Path("runs") / scenario.name
     check_out_dir(out_dir)
-    rec = simulate(scenario, engine, progress=progress)
+    rec = simulate(scenario, engine, progress=progress, coupling=coupling)
     report = compute_report(scenario, rec)
     summary = summary_of(scenario, rec, report, overrides)
     images: dict[str, bytes] = {}

@@ -10,11 +10,11 @@ from __future__ import annotations
 import re
 import sys
 
-from hoh_cosim.cosim.components import KINDS
+from hoh_cosim.cosim.components import KINDS, ComponentKind
 from hoh_cosim.fmi.build import fmu_name
 from hoh_cosim.fmi.slave import VariableSpec, block_interface
 
-__all__ = ["fmus_readme"]
+__all__ = ["fmus_readme", "kind_variables"]
 
 _ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<i>\d+)\]$")
 
@@ -86,32 +86,36 @@ def _starts(members: list[VariableSpec]) -> str:
 def fmus_readme() -> str:
     lines = [_HEADER]
     for kind in KINDS.values():
-        specs = block_interface(kind.block, kind.params)
         lines.append(f"## {fmu_name(kind.name)} (`fmus/{kind.fmu_script}.py`)\n")
-        lines.append(
-            f"{kind.description[0].upper()}{kind.description[1:]}: `{kind.block.__name__}`.\n"
-        )
-        for causality, title in (("input", "Inputs"), ("output", "Outputs")):
-            rows = _grouped([s for s in specs if s.causality == causality])
-            lines.append(f"{title}:\n")
-            lines.append("| name | unit | description |")
-            lines.append("|---|---|---|")
-            lines.extend(
-                f"| `{name}` | {_units(members)} | {members[0].description} |"
-                for name, members in rows
-            )
-            lines.append("")
-        rows = _grouped([s for s in specs if s.causality == "parameter"])
-        lines.append("Parameters:\n")
-        lines.append("| name | type | start | unit | variability |")
-        lines.append("|---|---|---|---|---|")
+        lines += kind_variables(kind)
+    return "\n".join(lines)
+
+
+def kind_variables(kind: ComponentKind) -> list[str]:
+    """Markdown lines: what the FMU of `kind` is, and its inputs, outputs and parameters."""
+    lines: list[str] = []
+    specs = block_interface(kind.block, kind.params)
+    lines.append(f"{kind.description[0].upper()}{kind.description[1:]}: `{kind.block.__name__}`.\n")
+    for causality, title in (("input", "Inputs"), ("output", "Outputs")):
+        rows = _grouped([s for s in specs if s.causality == causality])
+        lines.append(f"{title}:\n")
+        lines.append("| name | unit | description |")
+        lines.append("|---|---|---|")
         lines.extend(
-            f"| `{name}` | {members[0].type} | {_starts(members)} | {_units(members)} "
-            f"| {members[0].variability} |"
-            for name, members in rows
+            f"| `{name}` | {_units(members)} | {members[0].description} |" for name, members in rows
         )
         lines.append("")
-    return "\n".join(lines)
+    rows = _grouped([s for s in specs if s.causality == "parameter"])
+    lines.append("Parameters:\n")
+    lines.append("| name | type | start | unit | variability |")
+    lines.append("|---|---|---|---|---|")
+    lines.extend(
+        f"| `{name}` | {members[0].type} | {_starts(members)} | {_units(members)} "
+        f"| {members[0].variability} |"
+        for name, members in rows
+    )
+    lines.append("")
+    return lines
 
 
 if __name__ == "__main__":
