@@ -56,7 +56,7 @@ WORLD_DT = 1e-3
 
 # shared memory: [sequence, values...], written under a sequence lock (no lock a reader could
 # wait on: the world runs at a lower priority than the runner, which must never wait for it)
-_STATE = 3 + 9 + 6 + 6  # p, R, twist, [mode, safety, protective, emergency, program, time]
+_STATE = 3 + 9 + 6 + 6 + 6  # p, R, twist, [mode, safety, protective, emergency, program, time], q
 _COMMAND = 6 + 4  # twist, [acceleration, kick time, stop, sequence]
 
 
@@ -251,7 +251,7 @@ class _World:
             0.0 if self.program_stopped else 1.0,
             t,
         ]
-        self.state.write(np.concatenate([o["p_BT_B"], o["R_BT"], o["twist_B"], flags]))
+        self.state.write(np.concatenate([o["p_BT_B"], o["R_BT"], o["twist_B"], flags, o["q"]]))
 
     # --- the loop ------------------------------------------------------------------------------
 

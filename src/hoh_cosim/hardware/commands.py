@@ -156,6 +156,15 @@ def add_commands(sub: Any) -> None:
     )
     rehearse.add_argument("--rebias-samples", type=int, default=500, metavar="N")
     rehearse.add_argument(
+        "--ur-emulator",
+        metavar="HOST",
+        default=None,
+        help=(
+            "drive the arm through ur-rtde and a loopback UR controller listening on HOST "
+            "(e.g. 127.0.0.1; ports 29999, 30003, 30004) instead of shared memory"
+        ),
+    )
+    rehearse.add_argument(
         "--rt-priority",
         type=int,
         default=None,
@@ -319,6 +328,7 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         rebias_samples=args.rebias_samples,
         phantom_below_m=phantom,
         announce=_announce,
+        ur_host=args.ur_emulator,
     )
     print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
     return _report(result.session, log_path)

@@ -8,6 +8,7 @@ a rig. The calibration is the world's truth (the tool and the FT-150's offset), 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -27,9 +28,11 @@ from hoh_cosim.hardware.config import (
 )
 from hoh_cosim.hardware.fse103 import FSE103Port
 from hoh_cosim.hardware.ft150 import FT150Stream
+from hoh_cosim.hardware.robot import Robot, RtdeRobot
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import SessionLog
 from plant_models.emulators import Fault, RehearsalWorld, WorldSetup
+from plant_models.ur_controller import UrController
 
 __all__ = ["RehearsalResult", "rehearsal_config", "rehearse", "truth_calibration"]
 
@@ -107,8 +110,13 @@ def rehearse(
     seed: int = 1,
     realtime_priority: int | None = None,
     announce: Callable[[str], None] = lambda message: None,
+    ur_host: str | None = None,
 ) -> RehearsalResult:
-    """Start the world, run one session against it for `seconds`, stop everything."""
+    """Start the world, run one session against it for `seconds`, stop everything.
+
+    With `ur_host`, the robot is the world's arm behind the loopback UR controller
+    (`plant_models.ur_controller`) at that address, driven through ur-rtde by the real
+    `RtdeRobot`, as on a rig; otherwise the runner reaches the arm through shared memory."""
     # the hand takes the handle once the rebias (rebias_samples at 200 Hz) is surely over
     start = task_start_s if task_start_s is not None else 1.0 + rebias_samples / 200.0 + 1.0
     setup = WorldSetup(
@@ -131,9 +139,16 @@ def rehearse(
         calibration = truth_calibration(world.truth)
         ft = FT150Stream(config.ft150.host, config.ft150.port)
         probe = FSE103Port(config.probe.device, reconnect=False)  # type: ignore[union-attr]
-        log = SessionLog(log_path, _metadata(config, setup)).start()
-        runner = Runner(config, world.robot(), ft, probe, calibration, log, announce=announce)
-        session = runner.run(seconds)
+        with contextlib.ExitStack() as stack:
+            robot: Robot = world.robot()
+            if ur_host is not None:
+                series = "e" if robot_rate_hz == 500.0 else "cb3"
+                stack.enter_context(UrController(world, ur_host, series=series))
+                robot = RtdeRobot(ur_host, watchdog_hz=setup.watchdog_hz)
+                announce(f"UR controller emulated on {ur_host} (ur-rtde)")
+            log = SessionLog(log_path, _metadata(config, setup)).start()
+            runner = Runner(config, robot, ft, probe, calibration, log, announce=announce)
+            session = runner.run(seconds)
     return RehearsalResult(session, log_path, probe.parser.framing, probe.parser.byte_order)
 
 

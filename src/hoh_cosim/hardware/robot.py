@@ -7,9 +7,11 @@ apart.
 
 Safety (DESIGN.md §7, notes/hardware.md): the control interface uploads a URScript program that keeps
 executing the last speed command, so a process that hangs or dies would leave the robot moving.
-`connect()` enables ur-rtde's watchdog (the controller stops the program when no command arrives for
-`1/watchdog_hz` s), the runner kicks it every cycle, and `stop()` (speedStop, then stopScript) is
-called from a `finally`; it never raises, since it runs while something else has already gone wrong.
+`pacer()` enables ur-rtde's watchdog (the controller stops the program when no command arrives for
+`1/watchdog_hz` s) as the cycles start, the runner commands or kicks every cycle, and `stop()`
+(speedStop, then stopScript) is called from a `finally`; it never raises, since it runs while
+something else has already gone wrong. `plant_models.ur_controller` serves a controller on loopback
+for tests.
 """
 
 from __future__ import annotations
@@ -155,6 +157,11 @@ class RtdeRobot:
         self.period_s = 1.0 / frequency_hz if frequency_hz > 0 else math.nan
         self._control: Any = None
         self._receive: Any = None
+        self._commanded = False  # a speedL since the last kick (see kick_watchdog)
+        self.silence_s = 0.1  # no new controller state for this long: the link is gone
+        self._last_timestamp, self._last_change = math.nan, time.monotonic()
+        self._lost = False
+        self._watchdog_on = False
 
     def describe(self) -> str:
         return f"UR controller at {self.host} (RTDE)"
@@ -175,14 +182,31 @@ class RtdeRobot:
         except RuntimeError as exc:
             self.close()
             raise RunError(f"{self.describe()}: cannot connect: {exc}") from None
-        if not self._control.setWatchdog(self.watchdog_hz):
-            self.stop()
-            raise RunError(f"{self.describe()}: the watchdog could not be enabled")
         if math.isnan(self.period_s):
-            self.period_s = float(self._control.getStepTime())
+            self.period_s = self._step_time()
+
+    def _step_time(self) -> float:
+        """The controller's cycle. ur-rtde's getStepTime returns the register the control program
+        writes when asked, as it is when asked: the first call after the program starts reads 0,
+        so ask until the answer is a cycle (measured on the emulated controller)."""
+        for _ in range(50):
+            step = float(self._control.getStepTime())
+            if 0.0 < step <= 0.1:
+                return step
+            time.sleep(0.005)
+        self.stop()
+        raise RunError(f"{self.describe()}: the controller did not tell its cycle time")
 
     def pacer(self) -> _RtdePacer:
+        """The cycles' clock; the watchdog starts here, with the first paced cycle: from now on a
+        command or a kick goes out every cycle. (Started in connect(), it stopped the program
+        while the runner waited for the sensors' first samples, on the emulated controller.)"""
         control, _ = self._need()
+        if not self._watchdog_on:
+            if not control.setWatchdog(self.watchdog_hz):
+                self.stop()
+                raise RunError(f"{self.describe()}: the watchdog could not be enabled")
+            self._watchdog_on = True
         return _RtdePacer(control, self.period_s)
 
     def _need(self) -> tuple[Any, Any]:
@@ -192,6 +216,21 @@ class RtdeRobot:
 
     def state(self) -> RobotState:
         control, receive = self._need()
+        # ur-rtde's getters keep returning the last values when the connection is gone, and a
+        # silent link (a pulled cable) closes nothing for seconds: the controller's clock must move
+        if not (receive.isConnected() and control.isConnected()):
+            self._lost = True
+            raise RunError(f"{self.describe()}: the connection to the controller was lost")
+        timestamp = float(receive.getTimestamp())
+        now = time.monotonic()
+        if timestamp != self._last_timestamp:
+            self._last_timestamp, self._last_change = timestamp, now
+        elif now - self._last_change > self.silence_s:
+            self._lost = True
+            raise RunError(
+                f"{self.describe()}: the connection to the controller was lost (no new state for "
+                f"{1e3 * (now - self._last_change):.0f} ms)"
+            )
         pose = receive.getActualTCPPose()
         return RobotState(
             p_BT_B=np.array(pose[:3], dtype=float),
@@ -202,21 +241,37 @@ class RtdeRobot:
             protective_stop=bool(receive.isProtectiveStopped()),
             emergency_stop=bool(receive.isEmergencyStopped()),
             program_running=bool(control.isProgramRunning()),
-            timestamp_s=float(receive.getTimestamp()),
+            timestamp_s=timestamp,
         )
 
     def speed_l(self, twist_B: Vec, acceleration: float) -> None:
         control, _ = self._need()
+        self._commanded = True
         if not control.speedL([float(x) for x in twist_B], float(acceleration), 0.0):
-            raise RunError(f"{self.describe()}: speedL was refused")
+            # refused: name why, as the robot reports it now (a stop may have come since state())
+            problem = self.state().problem()
+            raise RunError(
+                f"{self.describe()}: speedL was refused" + (f": {problem}" if problem else "")
+            )
 
     def kick_watchdog(self) -> None:
+        """Kick the watchdog, unless a speedL went out since the last kick: that was the kick.
+
+        ur-rtde's control program reads its command register (`input_int_register_0`, also the
+        watchdog's) once per controller cycle, and kickWatchdog writes 0 there. Sent right after a
+        speedL in the same cycle, the kick overwrote the speedL before the program saw it: on the
+        emulated controller at 125 Hz no speedL of a whole session got through."""
         control, _ = self._need()
+        if self._commanded:
+            self._commanded = False
+            return
         control.kickWatchdog()
 
     def stop(self) -> None:
         control = self._control
-        if control is None:
+        if control is None or self._lost:
+            # a controller that cannot hear us cannot be stopped from here (ur-rtde's stopScript
+            # would wait minutes for it): its watchdog stops the program and the arm
             return
         with contextlib.suppress(Exception):
             control.speedStop(self.stop_deceleration)
@@ -224,6 +279,11 @@ class RtdeRobot:
             control.stopScript()
 
     def close(self) -> None:
+        if self._lost:
+            # ur-rtde's own threads are reconnecting by now; a disconnect() racing them aborted the
+            # process (measured on the emulated controller): leave the sockets to the process's end
+            self._control = self._receive = None
+            return
         for interface in (self._control, self._receive):
             if interface is not None:
                 with contextlib.suppress(Exception):

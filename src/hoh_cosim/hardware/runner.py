@@ -341,6 +341,8 @@ class Runner:
         except KeyboardInterrupt:
             cause, clean = "interrupted", True
         finally:
+            if not clean:  # said at once: closing the robot's connection may itself fail
+                self.announce(f"stopping: {cause}")
             self.robot.stop()
             for source in sources:
                 source.stop()

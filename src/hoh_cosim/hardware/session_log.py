@@ -188,8 +188,11 @@ def _writer_main(
     t0_unix_ns: int,
     replies: Any,
 ) -> None:
-    """The writer process: rows and events in, an MCAP file out."""
+    """The writer process: rows and events in, an MCAP file out. It finishes the file when told
+    to, or when the runner that started it is gone (killed: it never will be told)."""
     import os
+
+    parent = os.getppid()
 
     from mcap.writer import Writer
 
@@ -237,7 +240,7 @@ def _writer_main(
         done, last_flush = 0, time.monotonic()
         finishing = False
         while True:
-            finishing = finishing or stop.is_set()
+            finishing = finishing or stop.is_set() or os.getppid() != parent
             head = written.value
             # The loop writes row `head` into the slot of row `head - capacity` before it counts
             # it: rows from `head - capacity + 1` on are intact now (from `head - capacity` on once
