@@ -240,6 +240,7 @@ class _Emulator:
         self.speed_l_active = False
         self.last_cmd = -1
         self.silent_until = 0.0
+        self.outbox: list[bytes] = []
         self.twist = np.zeros(6)
         self.watchdog_hz = 0.0
         self.kicked = time.monotonic()
@@ -289,9 +290,11 @@ class _Emulator:
         for thread in self._threads:
             if thread is not threading.current_thread():
                 thread.join(2.0)
-        self._command(np.zeros(6))
+        with self.lock:  # the world's command has one writer at a time
+            self._command(np.zeros(6))
 
     def _spawn(self, target: Any, name: str, *args: Any) -> None:
+        self._threads = [t for t in self._threads if t.is_alive()]
         thread = threading.Thread(target=target, args=args, name=name, daemon=True)
         self._threads.append(thread)
         thread.start()
@@ -316,8 +319,9 @@ class _Emulator:
         if kind == "drop_connection":
             # the link goes down, as a pulled cable: the sockets stay open but nothing passes
             # either way; then the controller gives up on them, and listens again later
-            self.silent_until = time.monotonic() + refuse_s
-            self.refuse_until = self.silent_until + refuse_s
+            with self.lock:
+                self.silent_until = time.monotonic() + refuse_s
+                self.refuse_until = self.silent_until + refuse_s
             self._spawn(self._end_silence, "ur-silence")
 
     def _end_silence(self) -> None:
@@ -367,7 +371,7 @@ class _Emulator:
         running = self.runtime_state == PLAYING
         pose = list(p) + list(rotation_vector(R.reshape(3, 3)))
         return {
-            "timestamp": float(flags[5]),
+            "timestamp": self.cycles / self.rate_hz,  # the controller's own clock
             "actual_TCP_pose": pose,
             "target_TCP_pose": pose,
             "actual_TCP_speed": list(twist),
@@ -485,27 +489,33 @@ class _Emulator:
                 self._program_cycle(now)
                 state = self._state()
                 state.update(self.registers_out)
-                for name in ("input_int_register_0",):
-                    state[name] = self.inputs[name]
+                state.update(self.echoed())
                 connections = list(self.connections)
                 self.cycles += 1
                 cycle = self.cycles
+                outbox, self.outbox = self.outbox, []
             if now < self.silent_until:
                 continue
             for conn in connections:
-                if conn.started and conn.outputs is not None and cycle % conn.every == 0:
-                    names, types, layout, _ = conn.outputs
-                    values = [state.get(n, _zero(t)) for n, t in zip(names, types, strict=True)]
-                    try:
+                if not conn.started:
+                    continue
+                try:
+                    for message in outbox:
+                        conn.send(message)
+                    if conn.outputs is not None and cycle % conn.every == 0:
+                        names, types, layout, _ = conn.outputs
+                        values = [state.get(n, _zero(t)) for n, t in zip(names, types, strict=True)]
                         conn.send(rtde.encode_values(1, layout, values))
-                    except OSError:
-                        self._forget(conn)
+                except OSError:
+                    self._forget(conn)
+
+    def echoed(self) -> dict[str, Any]:
+        """The input registers, which a controller also offers as outputs."""
+        return {k: v for k, v in self.inputs.items() if k in rtde.OUTPUTS}
 
     def _broadcast(self, data: bytes) -> None:
-        for conn in list(self.connections):
-            if conn.started:
-                with contextlib.suppress(OSError):
-                    conn.send(data)
+        """Queued (the lock may be held): the cycle sends it to every started client."""
+        self.outbox.append(data)
 
     def _forget(self, conn: _Connection) -> None:
         with self.lock:
@@ -518,14 +528,18 @@ class _Emulator:
 
     # --- sockets ----------------------------------------------------------------------------------
 
+    def _silent(self) -> bool:
+        return time.monotonic() < self.silent_until
+
     def _accept_loop(self) -> None:
         handlers = {"dashboard": self._dashboard, "script": self._script, "rtde": self._rtde}
         while not self._stop.is_set():
-            if not self._listeners:
-                if time.monotonic() >= self.refuse_until:  # the link is back
-                    with contextlib.suppress(OSError):
-                        self._open_listeners()
-                        self._event("listening again")
+            if not self._listeners or self._silent():  # the link is down: nobody answers
+                if not self._listeners and time.monotonic() >= self.refuse_until:
+                    with self.lock, contextlib.suppress(OSError):
+                        if not self._stop.is_set():
+                            self._open_listeners()
+                            self._event("listening again")
                 time.sleep(0.05)
                 continue
             with self.lock:
@@ -540,6 +554,10 @@ class _Emulator:
                 except OSError:
                     continue
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                # a client that stops reading is dropped, not waited for: the cycle goes on
+                sock.setsockopt(
+                    socket.SOL_SOCKET, socket.SO_SNDTIMEO, struct.pack("ll", 0, 200_000)
+                )
                 with self.lock:
                     self.sockets.append(sock)
                 name = by_socket[listener]
@@ -553,6 +571,8 @@ class _Emulator:
                 data = sock.recv(4096)
                 if not data:
                     return
+                if self._silent():
+                    continue  # lost on the way
                 buffer += data
                 while b"\n" in buffer:
                     line, buffer = buffer.split(b"\n", 1)
@@ -579,20 +599,20 @@ class _Emulator:
                 return "Stopped"
             if command == "robotmode":
                 return "Robotmode: POWER_OFF" if self.emergency else "Robotmode: RUNNING"
-            if command == "safetystatus" or command == "safetymode":
+            if command in ("safetystatus", "safetymode"):
                 state = "NORMAL"
                 if self.protective:
                     state = "PROTECTIVE_STOP"
                 if self.emergency:
                     state = "ROBOT_EMERGENCY_STOP"
-                return f"Safetystatus: {state}"
+                return f"{command.capitalize()}: {state}"
             if command == "programState":
                 return "PLAYING rtde_control" if running else "STOPPED <unnamed>"
             if command == "running":
                 return f"Program running: {'true' if running else 'false'}"
             if command == "unlock protective stop":
-                if self.emergency:
-                    return "Cannot unlock protective stop until 5s after occurrence. Always inspect cause of protective stop before unlocking"
+                if not self.protective or self.emergency:
+                    return "Failed to execute: unlock protective stop"
                 self.protective = False
                 return "Protective stop releasing"
             if command == "close safety popup":
@@ -611,6 +631,8 @@ class _Emulator:
                 data = sock.recv(65536)
                 if not data:
                     return
+                if self._silent():
+                    continue  # lost on the way
                 buffer += data
                 text = buffer.decode(errors="replace")
                 if text.startswith("def ") and text.rstrip().endswith("\nend"):
@@ -732,6 +754,9 @@ class _Emulator:
                 self.inputs[name] = value
             if "input_int_register_0" in names:
                 self.kicked = time.monotonic()
+                cmd = int(self.inputs["input_int_register_0"])
+                if cmd and self.runtime_state != PLAYING:
+                    self._event(f"command {cmd} ignored: no program is running")
 
 
 def _zero(type_name: str) -> Any:

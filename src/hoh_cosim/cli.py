@@ -25,6 +25,7 @@ import numpy as np
 
 from hoh_cosim import __version__
 from hoh_cosim.cosim.engines import COUPLINGS, ENGINES
+from hoh_cosim.cosim.external import ENGINE_COUPLING, EXTERNAL_ENGINES
 from hoh_cosim.errors import ConfigError, HohError, RunError
 from hoh_cosim.hardware.commands import add_commands as add_hardware_commands
 from hoh_cosim.hardware.commands import run_command as run_hardware_command
@@ -200,6 +201,11 @@ def _run_scenario(argv: Sequence[str]) -> int:
     from hoh_cosim.cosim.run import run_scenario
 
     args = _scenario_parser().parse_args(argv)
+    if args.engine in EXTERNAL_ENGINES and args.coupling != "gauss-seidel":
+        raise ConfigError(
+            f"--coupling {args.coupling}: --engine {args.engine} has its own coupling "
+            f"({ENGINE_COUPLING[args.engine]})"
+        )
     if args.seed is not None and args.seed < 0:
         raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
     result = run_scenario(

@@ -292,12 +292,19 @@ def test_the_emulator_refuses_what_a_controller_refuses():
             assert a.ask("I", b"input_int_register_1").payload[0] == 0
             # a command with no program running moves nothing
             a.sock.sendall(rtde.pack("U", b"\x01" + struct.pack(">id", 10, 0.5)))
-            time.sleep(0.2)
+            assert wait_for(lambda: ur.said(r"^command 10 ignored: no program is running"), 2.0)
             assert arm_speed(world) < 1e-9
-            assert not ur.said(r"^command 10")
+            assert not ur.said(r"^command 10$")
         finally:
             a.close()
             b.close()
+
+        # the registers are free again once the controller has seen both connections go
+        def closed() -> int:
+            ur.said("")  # collect the events
+            return sum("rtde connection closed" in text for _, text in ur.events)
+
+        assert wait_for(lambda: closed() >= 2, 5.0)
         # ur_rtde sees the same refusals
         with pytest.raises(RuntimeError, match="not found"):
             rtde_receive.RTDEReceiveInterface(ur.host, -1.0, ["timestamp", "warp_factor"])

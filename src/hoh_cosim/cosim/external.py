@@ -150,7 +150,8 @@ def system_of(scenario: Scenario, fmu_paths: dict[str, Path] | None = None) -> S
 OSP_NAMESPACE = "http://opensimulationplatform.com/MSMI/OSPSystemStructure"
 
 
-def _xml_value(value: float | int | bool | str) -> str:
+def xml_value(value: float | int | bool | str) -> str:
+    """A start value as XML text: booleans in lower case, floats with every digit."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
@@ -184,7 +185,7 @@ def write_osp_system_structure(
         initial = ET.SubElement(simulator, "InitialValues")
         for var in system.start[name]:
             node = ET.SubElement(initial, "InitialValue", {"variable": var.name})
-            ET.SubElement(node, var.type, {"value": _xml_value(var.value)})
+            ET.SubElement(node, var.type, {"value": xml_value(var.value)})
     connections = ET.SubElement(root, "Connections")
     for src, src_var, dst, dst_var in system.links:
         link = ET.SubElement(connections, "VariableConnection")
@@ -221,7 +222,7 @@ class _Libcosim:
                 self.execution = CosimExecution.CosimExecution.from_osp_config_file(
                     str(config.parent)
                 )
-        except AssertionError:
+        except AssertionError:  # libcosimpy's way of saying that creation failed
             raise RunError(f"libcosim cannot load the system: {self._error()}") from None
         self.observer = CosimObserver.CosimObserver.create_last_value()
         self.execution.add_observer(self.observer)
@@ -313,7 +314,9 @@ class _Ecos:
         self._structure = structure  # the simulation refers to it
         # ecos applies a parameter set only when it is named here
         if not self.sim.init(parameter_set=PARAMETER_SET):
-            raise RunError(f"ecos: initialisation failed: {EcosLib.get_last_error()}")
+            error = EcosLib.get_last_error()
+            self.close()
+            raise RunError(f"ecos: initialisation failed: {error}")
         self._error = EcosLib.get_last_error
         self._get_real = dll.ecos_simulation_get_real
         self._ids = [f"{c}::{v}".encode() for c in scenario.components for v in system.outputs[c]]
@@ -347,6 +350,8 @@ class _Ecos:
         with contextlib.suppress(Exception):
             self.sim.terminate()
         self.sim.free()
+        if self._structure is not None:
+            self._structure.free()
 
 
 def simulate_external(

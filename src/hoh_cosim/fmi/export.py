@@ -33,6 +33,7 @@ from hoh_cosim.cosim.external import (
     System,
     system_of,
     write_osp_system_structure,
+    xml_value,
 )
 from hoh_cosim.cosim.scenario import Scenario, load_scenario
 from hoh_cosim.errors import RunError
@@ -56,14 +57,6 @@ def _q(namespace: str, tag: str) -> str:
 def _osp_annotation(parent: ET.Element) -> ET.Element:
     annotations = ET.SubElement(parent, _q(SSD, "Annotations"))
     return ET.SubElement(annotations, _q(SSC, "Annotation"), {"type": "com.opensimulationplatform"})
-
-
-def _value_text(value: float | int | bool | str) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)
-    return str(value)
 
 
 def ssd_xml(system: System, sources: dict[str, str]) -> bytes:
@@ -103,7 +96,7 @@ def ssd_xml(system: System, sources: dict[str, str]) -> bytes:
         parameters = ET.SubElement(parameter_set, _q(SSV, "Parameters"))
         for var in system.start[name]:
             parameter = ET.SubElement(parameters, _q(SSV, "Parameter"), {"name": var.name})
-            ET.SubElement(parameter, _q(SSV, var.type), {"value": _value_text(var.value)})
+            ET.SubElement(parameter, _q(SSV, var.type), {"value": xml_value(var.value)})
         hint = _osp_annotation(component)
         ET.SubElement(hint, _q(OSP, "StepSizeHint"), {"value": repr(system.step_size(name))})
     connections = ET.SubElement(system_node, _q(SSD, "Connections"))
@@ -150,10 +143,16 @@ def _check_ssp(path: Path, system: System) -> None:
     except Exception as exc:
         raise RunError(f"{path}: fmpy's SSP reader rejects it: {exc}") from None
     names = [e.name for e in ssd.system.elements]
-    if names != list(system.scenario.components) or len(ssd.system.connections) != len(
-        system.links
-    ):
-        raise RunError(f"{path}: fmpy reads back {names} and another set of connections")
+    if names != list(system.scenario.components):
+        raise RunError(
+            f"{path}: fmpy reads back the components {names}, expected "
+            f"{list(system.scenario.components)}"
+        )
+    if len(ssd.system.connections) != len(system.links):
+        raise RunError(
+            f"{path}: fmpy reads back {len(ssd.system.connections)} connections, expected "
+            f"{len(system.links)}"
+        )
 
 
 def _libpython() -> str:
@@ -318,10 +317,14 @@ def export_scenario(
     for fmu in sorted(set(system.fmus.values())):
         _validate_fmu(fmu)
     file_of = {name: fmu.name for name, fmu in system.fmus.items()}
-    if len(set(file_of.values())) != len(set(system.fmus.values())):
-        raise RunError(
-            f"{scenario.path}: two different FMUs of the scenario have the same file name"
-        )
+    by_name: dict[str, Path] = {}
+    for fmu in sorted(set(system.fmus.values())):
+        if fmu.name in by_name:
+            raise RunError(
+                f"{scenario.path}: two FMUs have the file name {fmu.name} ({by_name[fmu.name]} "
+                f"and {fmu}); the export keeps one folder of FMUs"
+            )
+        by_name[fmu.name] = fmu
     ssp_name = f"{scenario.name}.ssp"
     command = command or f"hoh-cosim export {path} --out {out}"
 

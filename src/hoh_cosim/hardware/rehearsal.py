@@ -19,6 +19,7 @@ import numpy as np
 from hoh_cosim.control.controller import ControllerParams
 from hoh_cosim.control.estimator import EstimatorParams
 from hoh_cosim.control.gravity import GravityCalibration
+from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.config import (
     FT150Config,
     HardwareConfig,
@@ -142,8 +143,15 @@ def rehearse(
         with contextlib.ExitStack() as stack:
             robot: Robot = world.robot()
             if ur_host is not None:
-                series = "e" if robot_rate_hz == 500.0 else "cb3"
-                stack.enter_context(UrController(world, ur_host, series=series))
+                series = {500.0: "e", 125.0: "cb3"}.get(robot_rate_hz)
+                if series is None:
+                    raise ConfigError(
+                        f"--rate: a UR controller runs at 125 or 500 Hz, got {robot_rate_hz:g}"
+                    )
+                try:
+                    stack.enter_context(UrController(world, ur_host, series=series))
+                except (RuntimeError, OSError) as exc:
+                    raise RunError(f"--ur-emulator {ur_host}: {exc}") from None
                 robot = RtdeRobot(ur_host, watchdog_hz=setup.watchdog_hz)
                 announce(f"UR controller emulated on {ur_host} (ur-rtde)")
             log = SessionLog(log_path, _metadata(config, setup)).start()

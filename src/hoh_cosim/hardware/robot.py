@@ -137,6 +137,9 @@ class _RtdePacer:
         return late
 
 
+_ABANDONED: list[Any] = []  # ur-rtde interfaces of a lost link, never destroyed (see close())
+
+
 class RtdeRobot:
     """A UR controller over RTDE with ur-rtde (installed with `pip install "hoh-cosim[hardware]"`)."""
 
@@ -167,6 +170,8 @@ class RtdeRobot:
         return f"UR controller at {self.host} (RTDE)"
 
     def connect(self) -> None:
+        self._lost = self._watchdog_on = self._commanded = False
+        self._last_timestamp, self._last_change = math.nan, time.monotonic()
         try:
             import rtde_control
             import rtde_receive
@@ -281,7 +286,9 @@ class RtdeRobot:
     def close(self) -> None:
         if self._lost:
             # ur-rtde's own threads are reconnecting by now; a disconnect() racing them aborted the
-            # process (measured on the emulated controller): leave the sockets to the process's end
+            # process (measured on the emulated controller), and the interfaces' destructors
+            # disconnect too: keep them alive, their sockets go with the process
+            _ABANDONED.extend(i for i in (self._control, self._receive) if i is not None)
             self._control = self._receive = None
             return
         for interface in (self._control, self._receive):
