@@ -213,10 +213,9 @@ def _readme(
         "needs:",
         "",
         "- Linux x86_64 with a GCC 12-era C++ runtime (Debian 12, Ubuntu 22.04 or newer);",
-        f"- a Python {python} environment with hoh-cosim {__version__} installed (the FMUs import "
-        "`hoh_cosim` and `plant_models` from it), e.g. "
-        f'`python{python} -m venv venv && venv/bin/pip install "hoh-cosim=={__version__}"` or, '
-        'from a checkout, `venv/bin/pip install ".[engines]"`;',
+        f"- a Python {python} environment with hoh-cosim {__version__} installed from its source "
+        "(the FMUs import `hoh_cosim` and `plant_models` from it): "
+        f'`python{python} -m venv venv && venv/bin/pip install "<the hoh-cosim checkout>[engines]"`;',
         "- inside that Python (fmpy, libcosimpy, ecospy) nothing else;",
         "- in a host that is not Python (a C or C++ tool on Linux): the Python library loaded "
         "before the FMUs (`LD_PRELOAD`), or they fail to load (`undefined symbol: "
