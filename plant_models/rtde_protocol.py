@@ -29,6 +29,7 @@ __all__ = [
     "pack",
     "read_package",
     "text_message",
+    "zero",
 ]
 
 # type name -> struct format (big-endian, no padding)
@@ -138,6 +139,9 @@ for _i in range(64, 128):
     OUTPUTS[f"input_bit_register_{_i}"] = "BOOL"
     INPUTS[f"input_bit_register_{_i}"] = "BOOL"
 
+COUNTS = {t: struct.calcsize(">" + f) // struct.calcsize(">" + f[-1]) for t, f in FORMATS.items()}
+"""How many scalars a value of each type has (a VECTOR6D has 6)."""
+
 HEADER = struct.Struct(">HB")
 
 
@@ -199,10 +203,19 @@ def decode_values(types: list[str], layout: struct.Struct, data: bytes) -> list[
     """The values of one recipe, vectors as lists; ValueError if `data` has the wrong length."""
     if len(data) != layout.size:
         raise ValueError(f"expected {layout.size} bytes of data, got {len(data)}")
-    flat = list(layout.unpack(data))
+    flat = layout.unpack(data)
     out: list[Any] = []
+    at = 0
     for t in types:
-        n = len(struct.Struct(">" + FORMATS[t]).unpack(bytes(struct.calcsize(">" + FORMATS[t]))))
-        out.append(flat[0] if n == 1 else flat[:n])
-        flat = flat[n:]
+        n = COUNTS[t]
+        out.append(flat[at] if n == 1 else list(flat[at : at + n]))
+        at += n
     return out
+
+
+def zero(type_name: str) -> Any:
+    """A value of the type that is all zeros (False for a BOOL)."""
+    scalar: Any = (
+        False if FORMATS[type_name] == "?" else 0.0 if FORMATS[type_name][-1] == "d" else 0
+    )
+    return scalar if COUNTS[type_name] == 1 else [scalar] * COUNTS[type_name]

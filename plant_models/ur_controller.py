@@ -42,6 +42,7 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -504,7 +505,9 @@ class _Emulator:
                         conn.send(message)
                     if conn.outputs is not None and cycle % conn.every == 0:
                         names, types, layout, _ = conn.outputs
-                        values = [state.get(n, _zero(t)) for n, t in zip(names, types, strict=True)]
+                        values = [
+                            state.get(n, rtde.zero(t)) for n, t in zip(names, types, strict=True)
+                        ]
                         conn.send(rtde.encode_values(1, layout, values))
                 except OSError:
                     self._forget(conn)
@@ -563,16 +566,20 @@ class _Emulator:
                 name = by_socket[listener]
                 self._spawn(handlers[name], f"ur-{name}", sock)
 
+    def _received(self, sock: socket.socket) -> Iterator[bytes]:
+        """What the client sends, until it closes; nothing while the link is down."""
+        while not self._stop.is_set():
+            data = sock.recv(65536)
+            if not data:
+                return
+            if not self._silent():  # else lost on the way
+                yield data
+
     def _dashboard(self, sock: socket.socket) -> None:
         with contextlib.suppress(OSError):
             sock.sendall(b"Connected: Universal Robots Dashboard Server\n")
             buffer = b""
-            while not self._stop.is_set():
-                data = sock.recv(4096)
-                if not data:
-                    return
-                if self._silent():
-                    continue  # lost on the way
+            for data in self._received(sock):
                 buffer += data
                 while b"\n" in buffer:
                     line, buffer = buffer.split(b"\n", 1)
@@ -627,12 +634,7 @@ class _Emulator:
         """The script port: a program is `def name():` ... `end`, the first line unindented."""
         buffer = b""
         with contextlib.suppress(OSError):
-            while not self._stop.is_set():
-                data = sock.recv(65536)
-                if not data:
-                    return
-                if self._silent():
-                    continue  # lost on the way
+            for data in self._received(sock):
                 buffer += data
                 text = buffer.decode(errors="replace")
                 if text.startswith("def ") and text.rstrip().endswith("\nend"):
@@ -757,13 +759,6 @@ class _Emulator:
                 cmd = int(self.inputs["input_int_register_0"])
                 if cmd and self.runtime_state != PLAYING:
                     self._event(f"command {cmd} ignored: no program is running")
-
-
-def _zero(type_name: str) -> Any:
-    fmt = rtde.FORMATS[type_name]
-    n = int(fmt[:-1]) if fmt[:-1] else 1
-    value: Any = False if fmt[-1] == "?" else (0.0 if fmt[-1] == "d" else 0)
-    return value if n == 1 else [value] * n
 
 
 def wait_for(predicate: Any, timeout_s: float, step_s: float = 0.01) -> bool:

@@ -69,6 +69,27 @@ def _gravity(text: str) -> np.ndarray:
     return np.array(values)
 
 
+def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
+    """--duration, --seed and --set: what changes a scenario as it is loaded."""
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
+    )
+    parser.add_argument("--seed", type=int, metavar="N", help="seed instead of the scenario's")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="C.P=V",
+        help="set a parameter, e.g. controller.contact_compensation=false (repeatable)",
+    )
+
+
+def _check_seed(args: argparse.Namespace) -> None:
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
+
+
 def _main_parser() -> argparse.ArgumentParser:
     parser = _ArgumentParser(
         prog="hoh-cosim",
@@ -100,18 +121,7 @@ def _main_parser() -> argparse.ArgumentParser:
     )
     export.add_argument("scenario", metavar="SCENARIO.yaml")
     export.add_argument("--out", required=True, metavar="DIR", help="the export directory")
-    export.add_argument(
-        "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
-    )
-    export.add_argument("--seed", type=int, metavar="N", help="seed instead of the scenario's")
-    export.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="C.P=V",
-        help="set a parameter, e.g. controller.contact_compensation=false (repeatable)",
-    )
+    _add_scenario_options(export)
 
     ident = sub.add_parser(
         "identify-gravity",
@@ -173,18 +183,7 @@ def _scenario_parser() -> argparse.ArgumentParser:
             "(jacobi) or ecos (jacobi-eager) do"
         ),
     )
-    parser.add_argument(
-        "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
-    )
-    parser.add_argument("--seed", type=int, metavar="N", help="seed instead of the scenario's")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="C.P=V",
-        help="set a parameter, e.g. controller.contact_compensation=false (repeatable)",
-    )
+    _add_scenario_options(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no metric table")
     return parser
 
@@ -206,8 +205,7 @@ def _run_scenario(argv: Sequence[str]) -> int:
             f"--coupling {args.coupling}: --engine {args.engine} has its own coupling "
             f"({ENGINE_COUPLING[args.engine]})"
         )
-    if args.seed is not None and args.seed < 0:
-        raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
+    _check_seed(args)
     result = run_scenario(
         args.scenario,
         out=args.out,
@@ -248,8 +246,7 @@ def _build_fmus(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace) -> int:
     from hoh_cosim.fmi.export import export_scenario
 
-    if args.seed is not None and args.seed < 0:
-        raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
+    _check_seed(args)
     result = export_scenario(
         args.scenario,
         args.out,

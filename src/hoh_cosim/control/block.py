@@ -29,6 +29,7 @@ __all__ = [
     "Port",
     "check_inputs",
     "make_block",
+    "port_element_names",
     "takes_rng",
     "zero_inputs",
 ]
@@ -57,6 +58,16 @@ class Port:
     def units(self) -> tuple[str, ...]:
         """The unit of every element."""
         return self.unit if isinstance(self.unit, tuple) else (self.unit,) * self.size
+
+    @property
+    def element_names(self) -> list[str]:
+        """The name of every element, as FMUs and recordings name them."""
+        return port_element_names(self.name, self.size)
+
+
+def port_element_names(name: str, size: int) -> list[str]:
+    """`name` for a scalar port, `name[1]` … `name[size]` otherwise (FMI structured naming)."""
+    return [name] if size == 1 else [f"{name}[{i + 1}]" for i in range(size)]
 
 
 class Block(Protocol):

@@ -86,10 +86,6 @@ class Runtime(Protocol):
     def close(self) -> None: ...
 
 
-def _element_names(name: str, size: int) -> list[str]:
-    return [name] if size == 1 else [f"{name}[{i + 1}]" for i in range(size)]
-
-
 def recording_layout(
     components: Sequence[ComponentSpec],
 ) -> tuple[dict[str, slice], dict[str, list[str]]]:
@@ -101,7 +97,7 @@ def recording_layout(
         for port in c.outputs:
             key = f"{c.name}.{port.name}"
             columns[key] = slice(offset, offset + port.size)
-            names[key] = [f"{c.name}.{n}" for n in _element_names(port.name, port.size)]
+            names[key] = [f"{c.name}.{n}" for n in port.element_names]
             offset += port.size
     return columns, names
 
@@ -235,19 +231,15 @@ class FmuRuntime:
         )
         self.vrs = {v.name: (v.valueReference, v.type) for v in md.modelVariables}
         for port in (*spec.inputs, *spec.outputs):
-            for name in _element_names(port.name, port.size):
+            for name in port.element_names:
                 if self.vrs.get(name, (None, "Real"))[1] != "Real" or name not in self.vrs:
                     raise ConfigError(
                         f"{fmu}: has no Real variable {name!r}, which a {spec.kind.name} "
                         f"component needs (port {port.name}[{port.size}])"
                     )
         self.in_buf = np.zeros(sum(p.size for p in spec.inputs))
-        self._in_vr = self._vr_array(
-            [n for p in spec.inputs for n in _element_names(p.name, p.size)]
-        )
-        self._out_vr = self._vr_array(
-            [n for p in spec.outputs for n in _element_names(p.name, p.size)]
-        )
+        self._in_vr = self._vr_array([n for p in spec.inputs for n in p.element_names])
+        self._out_vr = self._vr_array([n for p in spec.outputs for n in p.element_names])
         self._in_ptr = self.in_buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         self._set = self.fmu._functions["fmi2SetReal"]
         self._get = self.fmu._functions["fmi2GetReal"]

@@ -89,10 +89,6 @@ class System:
         return self.scenario.components[component].every * self.scenario.dt_s
 
 
-def _element(port: Any, index: int) -> str:
-    return port.name if port.size == 1 else f"{port.name}[{index + 1}]"
-
-
 def _fmi_value(var_type: str, value: Any) -> float | int | bool | str:
     return {"Real": float, "Integer": int, "Boolean": bool, "String": str}[var_type](value)
 
@@ -124,7 +120,7 @@ def system_of(scenario: Scenario, fmu_paths: dict[str, Path] | None = None) -> S
         for port in c.inputs:
             default = scenario.input_defaults.get((c.name, port.name))
             if default is not None:
-                wanted += [(_element(port, i), float(v)) for i, v in enumerate(default)]
+                wanted += list(zip(port.element_names, map(float, default), strict=True))
         for name, value in wanted:
             if name not in types:
                 raise ConfigError(
@@ -132,7 +128,7 @@ def system_of(scenario: Scenario, fmu_paths: dict[str, Path] | None = None) -> S
                 )
             values.append(FmiVariable(name, types[name], _fmi_value(types[name], value)))
         start[c.name] = values
-        outputs[c.name] = [_element(p, i) for p in c.outputs for i in range(p.size)]
+        outputs[c.name] = [n for p in c.outputs for n in p.element_names]
         missing = [n for n in outputs[c.name] if types.get(n) != "Real"]
         if missing:
             raise ConfigError(f"{fmus[c.name]}: has no Real output {missing[0]!r} ({c.name})")
@@ -141,7 +137,7 @@ def system_of(scenario: Scenario, fmu_paths: dict[str, Path] | None = None) -> S
         src_port = next(p for p in scenario.components[conn.src].outputs if p.name == conn.src_port)
         dst_port = next(p for p in scenario.components[conn.dst].inputs if p.name == conn.dst_port)
         for s, d in zip(conn.src_elements, conn.dst_elements, strict=True):
-            links.append((conn.src, _element(src_port, s), conn.dst, _element(dst_port, d)))
+            links.append((conn.src, src_port.element_names[s], conn.dst, dst_port.element_names[d]))
     return System(scenario, fmus, start, links, outputs, value_refs)
 
 

@@ -37,7 +37,6 @@ from hoh_cosim.cosim.external import (
 )
 from hoh_cosim.cosim.scenario import Scenario, load_scenario
 from hoh_cosim.errors import RunError
-from hoh_cosim.fmi.slave import port_element_names
 
 __all__ = ["ExportResult", "export_scenario", "ssd_xml"]
 
@@ -82,7 +81,7 @@ def ssd_xml(system: System, sources: dict[str, str]) -> bytes:
         connectors = ET.SubElement(component, _q(SSD, "Connectors"))
         for kind, ports in (("input", spec.inputs), ("output", spec.outputs)):
             for port in ports:
-                for element in port_element_names(port.name, port.size):
+                for element in port.element_names:
                     connector = ET.SubElement(
                         connectors, _q(SSD, "Connector"), {"name": element, "kind": kind}
                     )

@@ -36,7 +36,7 @@ from pythonfmu import Fmi2Slave as _PythonFmuSlave
 from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from hoh_cosim.control.block import make_block, takes_rng
+from hoh_cosim.control.block import make_block, port_element_names, takes_rng
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import leaves, with_values
 
@@ -64,19 +64,12 @@ class VariableSpec:
     description: str
 
 
-def port_element_names(name: str, size: int) -> list[str]:
-    """`name` for a scalar port, `name[1]` … `name[size]` otherwise (FMI structured naming)."""
-    return [name] if size == 1 else [f"{name}[{i + 1}]" for i in range(size)]
-
-
 def block_interface(block_cls: type, params_cls: type) -> list[VariableSpec]:
     """Every FMI variable of the FMU wrapping `block_cls`, in value-reference order."""
     specs: list[VariableSpec] = []
     for causality, ports in (("input", block_cls.inputs), ("output", block_cls.outputs)):
         for port in ports:
-            for element, unit in zip(
-                port_element_names(port.name, port.size), port.units, strict=True
-            ):
+            for element, unit in zip(port.element_names, port.units, strict=True):
                 specs.append(
                     VariableSpec(
                         element,
