@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hoh_cosim.cosim.components import ComponentKind
 from hoh_cosim.cosim.engines import simulate
 from hoh_cosim.cosim.scenario import ComponentSpec, Connection, Scenario, load_scenario
 from hoh_cosim.fmi import exit_fix
 from hoh_cosim.fmi.build import build_fmu, ensure_fmus
+from hoh_cosim.kinds import ComponentKind
 
 ROOT = Path(__file__).resolve().parents[1]
 N_TRIVIAL = 4

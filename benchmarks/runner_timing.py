@@ -27,7 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from hoh_cosim.hardware.rehearsal import rehearse
+from hoh_cosim.rehearsal.rehearse import rehearse
 
 
 def bare_pacing(seconds: float, period_s: float, priority: int | None) -> dict[str, float]:

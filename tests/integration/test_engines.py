@@ -23,8 +23,9 @@ import numpy as np
 import pytest
 
 from hoh_cosim.cli import main
-from hoh_cosim.cosim.engines import Recording, simulate
+from hoh_cosim.cosim.engines import simulate
 from hoh_cosim.cosim.external import ENGINE_COUPLING, import_ecospy, simulate_external
+from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import compute_report
 from hoh_cosim.cosim.scenario import load_scenario
 from hoh_cosim.fmi.build import ensure_fmus

@@ -26,7 +26,6 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
 
 from hoh_cosim.control.block import make_block
-from hoh_cosim.cosim.components import KINDS, ComponentKind
 from hoh_cosim.cosim.engines import simulate
 from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 from hoh_cosim.errors import RunError
@@ -34,6 +33,7 @@ from hoh_cosim.fmi.build import ensure_fmus, fmu_name
 from hoh_cosim.fmi.docs import fmus_readme
 from hoh_cosim.fmi.model_description import finish_model_description
 from hoh_cosim.fmi.slave import block_interface, port_element_names
+from hoh_cosim.kinds import KINDS, ComponentKind
 from hoh_cosim.params import leaves, with_values
 from plant_models.operator import Operator, OperatorParams
 

@@ -1,6 +1,6 @@
 """The real runner, drivers and session log against emulated devices, with faults.
 
-Each session runs the world in a process of its own (`plant_models.emulators`): an FT-150 stream on
+Each session runs the world in a process of its own (`hoh_cosim.rehearsal.world`): an FT-150 stream on
 loopback, an FSE103 on a pseudo-terminal and the UR5 behind shared memory, in real time. Every fault
 must end in a stopped robot, a message that names the cause and a complete log.
 """
@@ -21,11 +21,11 @@ from hoh_cosim.hardware.calibrate import calibrate
 from hoh_cosim.hardware.diagnostics import read_streams
 from hoh_cosim.hardware.fse103 import FSE103Port
 from hoh_cosim.hardware.ft150 import FT150Stream
-from hoh_cosim.hardware.rehearsal import rehearsal_config, truth_calibration
 from hoh_cosim.hardware.robot import RobotState
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import Session, SessionLog, read_session
-from plant_models.emulators import Fault, RehearsalWorld, WorldSetup
+from hoh_cosim.rehearsal.rehearse import rehearsal_config, truth_calibration
+from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
 
 FAULT_AT_S = 3.0  # world time; the runner's rebias (100 samples) ends by about 1.5 s
 

@@ -23,7 +23,7 @@ from hoh_cosim.hardware.session_log import SessionLog, read_session
 from hoh_cosim.params import leaves
 
 if TYPE_CHECKING:
-    from hoh_cosim.hardware.rehearsal import RehearsalResult
+    from hoh_cosim.rehearsal.rehearse import RehearsalResult
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="the rehearsal needs POSIX ptys")
 pytest.importorskip("mcap")
@@ -38,7 +38,7 @@ PNG = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def rehearsal(tmp_path_factory) -> RehearsalResult:
     """The one rehearsal of this module: 4 s of the circle task after a 100-sample rebias."""
-    from hoh_cosim.hardware.rehearsal import rehearse  # POSIX only (ptys)
+    from hoh_cosim.rehearsal.rehearse import rehearse  # POSIX only (ptys)
 
     path = tmp_path_factory.mktemp("rehearsal") / "s.mcap"
     return rehearse(SECONDS, path, rebias_samples=100)

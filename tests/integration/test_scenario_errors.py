@@ -22,9 +22,9 @@ import yaml
 from hoh_cosim.cli import main
 from hoh_cosim.control.controller import ControllerParams
 from hoh_cosim.control.estimator import EstimatorParams
-from hoh_cosim.cosim.components import KINDS
 from hoh_cosim.cosim.scenario import load_scenario
 from hoh_cosim.errors import ConfigError
+from hoh_cosim.kinds import KINDS
 from hoh_cosim.params import leaves
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,5 +1,5 @@
 """The runner's real RTDE path, end to end: unmodified ur_rtde and `hoh-cosim hw run` against the
-loopback UR controller (`plant_models.ur_controller`), backed by the rehearsal world's arm, with the
+loopback UR controller (`hoh_cosim.rehearsal.ur_controller`), backed by the rehearsal world's arm, with the
 FT-150 and FSE103 from the rehearsal's emulators.
 
 ur_rtde always uses the ports 29999, 30003 and 30004, so every emulator here gets a loopback address
@@ -25,12 +25,12 @@ import rtde_control
 import rtde_receive
 
 from hoh_cosim.calibration import write_calibration
-from hoh_cosim.hardware.rehearsal import truth_calibration
 from hoh_cosim.hardware.robot import RtdeRobot
 from hoh_cosim.hardware.session_log import read_session
-from plant_models import rtde_protocol as rtde
-from plant_models.emulators import RehearsalWorld, WorldSetup
-from plant_models.ur_controller import UrController, wait_for
+from hoh_cosim.rehearsal import rtde_protocol as rtde
+from hoh_cosim.rehearsal.rehearse import truth_calibration
+from hoh_cosim.rehearsal.ur_controller import UrController, wait_for
+from hoh_cosim.rehearsal.world import RehearsalWorld, WorldSetup
 
 _HOSTS = (f"127.0.0.{i}" for i in itertools.count(11))
 WATCHDOG_HZ = 5.0  # 200 ms: a VM stall of 40 ms must not trip it, a dead runner must

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hoh_cosim.cosim.engines import Recording
+from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import SETTLE_SPEED_M_S, compute_report, lag_in_window
 from hoh_cosim.cosim.scenario import load_scenario
 

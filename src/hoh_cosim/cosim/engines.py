@@ -33,7 +33,6 @@ import tempfile
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -41,38 +40,19 @@ import numpy as np
 
 from hoh_cosim.control.block import make_block
 from hoh_cosim.cosim.external import EXTERNAL_ENGINES, simulate_external
+from hoh_cosim.cosim.recording import Recording, recording_layout
 from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.fmi import exit_fix
 from hoh_cosim.params import leaves
 
-__all__ = ["COUPLINGS", "ENGINES", "Recording", "recording_layout", "simulate"]
+__all__ = ["COUPLINGS", "ENGINES", "simulate"]
 
 ENGINES = ("fmu", "inprocess", *EXTERNAL_ENGINES)
 # how an output reaches the inputs it is connected to (see `hoh_cosim.cosim.external`):
 # gauss-seidel: at once, in the file's order; jacobi: when the source's step ends (libcosim);
 # jacobi-eager: one tick after the source's step began, even if that step lasts several (ecos)
 COUPLINGS = ("gauss-seidel", "jacobi", "jacobi-eager")
-
-
-@dataclass
-class Recording:
-    """Every output of every component at every tick, and how long the run took."""
-
-    time: np.ndarray  # (n + 1,)
-    values: np.ndarray  # (n + 1, total outputs)
-    columns: dict[str, slice]  # "component.port" -> columns
-    element_names: dict[str, list[str]]  # "component.port" -> its CSV column names
-    wall_s: float
-    engine: str
-    coupling: str = "gauss-seidel"  # our master's; "jacobi" (libcosim), "jacobi-eager" (ecos)
-
-    def __getitem__(self, signal: str) -> np.ndarray:
-        """`component.port` as an (n + 1, size) array."""
-        return self.values[:, self.columns[signal]]
-
-    def __contains__(self, signal: str) -> bool:
-        return signal in self.columns
 
 
 class Runtime(Protocol):
@@ -84,22 +64,6 @@ class Runtime(Protocol):
     def step(self, t: float, dt: float) -> None: ...
     def retune(self, params: Any, changes: dict[str, Any]) -> None: ...
     def close(self) -> None: ...
-
-
-def recording_layout(
-    components: Sequence[ComponentSpec],
-) -> tuple[dict[str, slice], dict[str, list[str]]]:
-    """The columns of a `Recording`: every output port of every component, in order."""
-    columns: dict[str, slice] = {}
-    names: dict[str, list[str]] = {}
-    offset = 0
-    for c in components:
-        for port in c.outputs:
-            key = f"{c.name}.{port.name}"
-            columns[key] = slice(offset, offset + port.size)
-            names[key] = [f"{c.name}.{n}" for n in port.element_names]
-            offset += port.size
-    return columns, names
 
 
 class InProcessRuntime:

@@ -42,6 +42,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
+from hoh_cosim.cosim.recording import Recording, recording_layout
 from hoh_cosim.cosim.scenario import Scenario
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.params import leaves
@@ -362,7 +363,6 @@ def simulate_external(
     """Run `scenario` in `engine` ("libcosim" or "ecos") and read every output after every step
     (`record=False` reads none: the engine's own speed). With `ssp`, the engine loads the system
     from that archive (made by `hoh-cosim export`) instead of from our translation."""
-    from hoh_cosim.cosim.engines import Recording, recording_layout
 
     if engine not in EXTERNAL_ENGINES:
         raise ConfigError(f"expected one of {', '.join(EXTERNAL_ENGINES)}, got {engine!r}")

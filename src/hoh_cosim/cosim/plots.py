@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from hoh_cosim.cosim.engines import Recording
+from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import Report
 from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 

@@ -61,8 +61,8 @@ import numpy as np
 
 from hoh_cosim.control.gravity import identify_gravity
 from hoh_cosim.control.limits import STOP_FLAGS, Status
-from hoh_cosim.cosim.engines import Recording
 from hoh_cosim.cosim.metrics import sinusoid_phase
+from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 from hoh_cosim.errors import IdentificationError
 

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim import __version__
-from hoh_cosim.cosim.engines import Recording, simulate
+from hoh_cosim.cosim.engines import simulate
+from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import Report, compute_report
 from hoh_cosim.cosim.scenario import Scenario, load_scenario
 from hoh_cosim.errors import ConfigError

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim.control.block import Port
-from hoh_cosim.cosim.components import KINDS, ComponentKind
 from hoh_cosim.errors import ConfigError
+from hoh_cosim.kinds import KINDS, ComponentKind
 from hoh_cosim.params import from_mapping, leaves, override
 from hoh_cosim.yamlfile import Where, parse_value, read_yaml
 

@@ -23,10 +23,10 @@ from pathlib import Path
 
 import hoh_cosim
 import plant_models
-from hoh_cosim.cosim.components import KINDS
 from hoh_cosim.errors import HohError, RunError
 from hoh_cosim.fmi.model_description import finish_model_description
 from hoh_cosim.fmi.slave import block_interface
+from hoh_cosim.kinds import KINDS
 
 __all__ = [
     "build_fmu",

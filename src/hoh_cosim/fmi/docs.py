@@ -10,9 +10,9 @@ from __future__ import annotations
 import re
 import sys
 
-from hoh_cosim.cosim.components import KINDS, ComponentKind
 from hoh_cosim.fmi.build import fmu_name
 from hoh_cosim.fmi.slave import VariableSpec, block_interface
+from hoh_cosim.kinds import KINDS, ComponentKind
 
 __all__ = ["fmus_readme", "kind_variables"]
 

@@ -2,7 +2,7 @@
 
 `RtdeRobot` is the real one, through ur-rtde's RTDEReceiveInterface and RTDEControlInterface (seed
 000, section 2: the seed drove its UR5 over RTDE). The rehearsal's simulated robot
-(`plant_models.emulators.SimulatedRobot`) offers the same methods, so the runner cannot tell them
+(`hoh_cosim.rehearsal.world.SimulatedRobot`) offers the same methods, so the runner cannot tell them
 apart.
 
 Safety (DESIGN.md §7, notes/hardware.md): the control interface uploads a URScript program that keeps
@@ -10,7 +10,7 @@ executing the last speed command, so a process that hangs or dies would leave th
 `pacer()` enables ur-rtde's watchdog (the controller stops the program when no command arrives for
 `1/watchdog_hz` s) as the cycles start, the runner commands or kicks every cycle, and `stop()`
 (speedStop, then stopScript) is called from a `finally`; it never raises, since it runs while
-something else has already gone wrong. `plant_models.ur_controller` serves a controller on loopback
+something else has already gone wrong. `hoh_cosim.rehearsal.ur_controller` serves a controller on loopback
 for tests.
 """
 

@@ -37,7 +37,7 @@ def _endpoint(text: str) -> tuple[str, int]:
 
 
 def _fault(text: str) -> Any:
-    from plant_models.emulators import FAULTS, Fault
+    from hoh_cosim.rehearsal.world import FAULTS, Fault
 
     kind, _, at = text.partition("@")
     try:
@@ -313,7 +313,7 @@ def _hw_sensors(args: argparse.Namespace) -> int:
 
 
 def _hw_rehearse(args: argparse.Namespace) -> int:
-    from hoh_cosim.hardware.rehearsal import rehearse
+    from hoh_cosim.rehearsal.rehearse import rehearse
 
     if not args.seconds > 0:
         raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")

@@ -10,7 +10,7 @@ What it serves (ports chosen by the caller, defaults 29999, 30003, 30004; ur_rtd
 the defaults, so a test gives each emulator its own loopback address, 127.0.0.x):
 - the dashboard server: the banner and the replies ur_rtde reads (`PolyscopeVersion`, `get serial
   number`, `is in remote control`, `stop`), and the usual status queries;
-- RTDE protocol 2 (`plant_models.rtde_protocol`): version, controller version (5.11 in e-series mode,
+- RTDE protocol 2 (`hoh_cosim.rehearsal.rtde_protocol`): version, controller version (5.11 in e-series mode,
   500 Hz; 3.15 in CB3 mode, 125 Hz), output and input recipes (NOT_FOUND for what it does not have,
   IN_USE for an input another connection writes), start, pause, data both ways at the robot's rate,
   text messages for what it refuses;
@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from plant_models import rtde_protocol as rtde
+from hoh_cosim.rehearsal import rtde_protocol as rtde
 
 __all__ = ["INJECTIONS", "UrController", "rotation_vector"]
 
@@ -188,7 +188,7 @@ class _SharedWorld:
     """The world's shared memory, as the emulator's process sees it."""
 
     def __init__(self, state: Any, command: Any) -> None:
-        from plant_models.emulators import _SeqLock
+        from hoh_cosim.rehearsal.world import _SeqLock
 
         self._state, self._command = _SeqLock(state), _SeqLock(command)
 

@@ -1,6 +1,6 @@
 """A rehearsal: the real runner, real drivers and real session log against emulated devices.
 
-`plant_models.emulators` serves an FT-150 stream on loopback and an FSE103 on a pseudo-terminal from
+`hoh_cosim.rehearsal.world` serves an FT-150 stream on loopback and an FSE103 on a pseudo-terminal from
 a world process that moves the simulated arm in real time; the runner connects to them exactly as to
 a rig. The calibration is the world's truth (the tool and the FT-150's offset), as a perfect
 `hoh-cosim hw calibrate` would find it; `rehearse(calibrate=True)` runs the real calibration first.
@@ -32,8 +32,8 @@ from hoh_cosim.hardware.ft150 import FT150Stream
 from hoh_cosim.hardware.robot import Robot, RtdeRobot
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import SessionLog
-from plant_models.emulators import Fault, RehearsalWorld, WorldSetup
-from plant_models.ur_controller import UrController
+from hoh_cosim.rehearsal.ur_controller import UrController
+from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
 
 __all__ = ["RehearsalResult", "rehearsal_config", "rehearse", "truth_calibration"]
 
@@ -116,7 +116,7 @@ def rehearse(
     """Start the world, run one session against it for `seconds`, stop everything.
 
     With `ur_host`, the robot is the world's arm behind the loopback UR controller
-    (`plant_models.ur_controller`) at that address, driven through ur-rtde by the real
+    (`hoh_cosim.rehearsal.ur_controller`) at that address, driven through ur-rtde by the real
     `RtdeRobot`, as on a rig; otherwise the runner reaches the arm through shared memory."""
     # the hand takes the handle once the rebias (rebias_samples at 200 Hz) is surely over
     start = task_start_s if task_start_s is not None else 1.0 + rebias_samples / 200.0 + 1.0

@@ -12,7 +12,7 @@ Every package is a big-endian header, uint16 size (header included) and uint8 ty
 
 Names and types are comma-separated ASCII. A type the controller does not have is NOT_FOUND; an
 input another client already writes is IN_USE. Facts from UR's RTDE guide; the values each variable
-carries are the emulator's (`plant_models.ur_controller`).
+carries are the emulator's (`hoh_cosim.rehearsal.ur_controller`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,281 @@
+"""The co-simulation commands of `hoh-cosim`:
+
+hoh-cosim SCENARIO.yaml [--out DIR] [--engine fmu|inprocess|libcosim|ecos] [--duration S]
+                        [--coupling gauss-seidel|jacobi|jacobi-eager] [--seed N]
+                        [--set component.parameter=value ...]
+hoh-cosim build-fmus [--out DIR]
+hoh-cosim export SCENARIO.yaml --out DIR [--duration S] [--seed N] [--set ...]
+hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from hoh_cosim.commands import ArgumentParser
+from hoh_cosim.cosim.engines import COUPLINGS, ENGINES
+from hoh_cosim.cosim.external import ENGINE_COUPLING, EXTERNAL_ENGINES
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["COMMANDS", "add_commands", "run_command", "run_scenario_command"]
+
+COMMANDS = ("build-fmus", "export", "identify-gravity")
+
+
+def _gravity(text: str) -> np.ndarray:
+    parts = text.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) != 3 or not np.all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(
+            f"expected three comma-separated numbers like 0,0,-9.81, got {text!r}"
+        )
+    return np.array(values)
+
+
+def add_scenario_options(parser: argparse.ArgumentParser) -> None:
+    """--duration, --seed and --set: what changes a scenario as it is loaded."""
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
+    )
+    parser.add_argument("--seed", type=int, metavar="N", help="seed instead of the scenario's")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="C.P=V",
+        help="set a parameter, e.g. controller.contact_compensation=false (repeatable)",
+    )
+
+
+def check_seed(args: argparse.Namespace) -> None:
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError(f"--seed: expected an integer >= 0, got {args.seed}")
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    """`build-fmus`, `export` and `identify-gravity` on the main parser's subparsers."""
+    build = sub.add_parser(
+        "build-fmus",
+        help="build every component's FMU",
+        description=(
+            "Build every component's FMI 2.0 co-simulation FMU with pythonfmu. Without --out, into "
+            "the cache a scenario run uses (only what is missing or out of date); with --out, all of "
+            "them afresh into DIR."
+        ),
+    )
+    build.add_argument("--out", metavar="DIR", help="where to put the .fmu files")
+
+    export = sub.add_parser(
+        "export",
+        help="write a scenario's FMUs, an SSP archive and a README for another tool",
+        description=(
+            "Write the scenario's FMUs (validated), an SSP 1.0 archive of the system with its "
+            "connections and parameter values, the same system as OspSystemStructure.xml, and a "
+            "README with every variable and what a host needs."
+        ),
+    )
+    export.add_argument("scenario", metavar="SCENARIO.yaml")
+    export.add_argument("--out", required=True, metavar="DIR", help="the export directory")
+    add_scenario_options(export)
+
+    ident = sub.add_parser(
+        "identify-gravity",
+        help="identify the tool's mass, centre of mass and sensor offsets from static poses",
+        description=(
+            "Identify mass, centre of mass, force and torque bias of the tool on the wrist F/T "
+            "sensor from static, untouched poses (header rx,ry,rz,fx,fy,fz,tx,ty,tz: rotation "
+            "vector of R_BS in rad, raw averaged reading in N and N·m)."
+        ),
+    )
+    ident.add_argument("poses", metavar="POSES.csv")
+    ident.add_argument(
+        "--out",
+        default="calibration.json",
+        metavar="FILE",
+        help="where to write the calibration (default: calibration.json)",
+    )
+    ident.add_argument(
+        "--gravity",
+        type=_gravity,
+        default=None,
+        metavar="GX,GY,GZ",
+        help="gravity in the base frame, m/s² (default: 0,0,-9.81)",
+    )
+
+
+def _scenario_parser(others: Sequence[str]) -> argparse.ArgumentParser:
+    parser = ArgumentParser(
+        prog="hoh-cosim",
+        usage="hoh-cosim SCENARIO.yaml [options]",
+        description=(
+            "Run a co-simulation scenario and write signals.csv, summary.json and plots into "
+            "the output directory."
+        ),
+        epilog="Other commands: " + ", ".join(others) + " (see hoh-cosim COMMAND --help).",
+    )
+    parser.add_argument("scenario", metavar="SCENARIO.yaml")
+    parser.add_argument(
+        "--out", metavar="DIR", help="results directory (default: runs/<scenario name>)"
+    )
+    parser.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="fmu",
+        help=(
+            "step the components as FMUs through fmpy (default), as Python blocks in-process, or "
+            "as FMUs in libcosim or ecos"
+        ),
+    )
+    parser.add_argument(
+        "--coupling",
+        choices=COUPLINGS,
+        default="gauss-seidel",
+        help=(
+            "how our master passes outputs on: in the file's order (default), or as libcosim "
+            "(jacobi) or ecos (jacobi-eager) do"
+        ),
+    )
+    add_scenario_options(parser)
+    parser.add_argument("--quiet", action="store_true", help="no progress bar, no metric table")
+    return parser
+
+
+def _metric_text(value: object) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_metric_text(v) for v in value) + "]"
+    return "n/a" if value is None else str(value)
+
+
+def run_scenario_command(argv: Sequence[str], others: Sequence[str]) -> int:
+    from hoh_cosim.cosim.run import run_scenario
+
+    args = _scenario_parser(others).parse_args(argv)
+    if args.engine in EXTERNAL_ENGINES and args.coupling != "gauss-seidel":
+        raise ConfigError(
+            f"--coupling {args.coupling}: --engine {args.engine} has its own coupling "
+            f"({ENGINE_COUPLING[args.engine]})"
+        )
+    check_seed(args)
+    result = run_scenario(
+        args.scenario,
+        out=args.out,
+        engine=args.engine,
+        coupling=args.coupling,
+        duration_s=args.duration,
+        seed=args.seed,
+        overrides=args.overrides,
+        progress=not args.quiet,
+    )
+    for note in result.report.notes:
+        print(f"hoh-cosim: note: {note}", file=sys.stderr)
+    if not args.quiet:
+        s = result.summary
+        print(
+            f"{s['scenario']}: {s['duration_s']:g} s simulated in {s['wall_s']:.2f} s "
+            f"({_metric_text(s['realtime_factor'])}x real time, engine {s['engine']}, seed {s['seed']})"
+        )
+        width = max(len(k) for k in s["metrics"])
+        for key, value in s["metrics"].items():
+            if key not in ("wall_s", "realtime_factor"):
+                print(f"  {key:<{width}}  {_metric_text(value)}")
+    print(f"wrote {result.out}")
+    return 0
+
+
+def _build_fmus(args: argparse.Namespace) -> int:
+    from hoh_cosim.fmi.build import default_cache_dir, ensure_fmus
+    from hoh_cosim.kinds import KINDS
+
+    out = Path(args.out) if args.out else default_cache_dir()
+    paths = ensure_fmus(KINDS, out, force=args.out is not None)
+    for kind, path in paths.items():
+        print(f"{kind:<11} {path}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from hoh_cosim.cosim.export import export_scenario
+
+    check_seed(args)
+    result = export_scenario(
+        args.scenario,
+        args.out,
+        overrides=args.overrides,
+        duration_s=args.duration,
+        seed=args.seed,
+        command=shlex.join(["hoh-cosim", "export", *args.argv]),
+    )
+    for component, path in result.fmus.items():
+        print(f"{component:<11} {path}")
+    print(f"wrote {result.ssp} and {result.out / 'README.md'}")
+    return 0
+
+
+def _fmt(values: np.ndarray, digits: int = 5, signed: bool = True) -> str:
+    sign = "+" if signed else ""
+    return "[" + ", ".join(f"{v:{sign}.{digits}f}" for v in values) + "]"
+
+
+def _identify_gravity(args: argparse.Namespace) -> int:
+    from hoh_cosim.calibration import read_poses_csv, write_calibration
+    from hoh_cosim.control.gravity import identify_gravity
+    from hoh_cosim.control.vectors import GRAVITY_B
+    from hoh_cosim.errors import IdentificationError, InputFileError
+
+    g_B = GRAVITY_B if args.gravity is None else args.gravity
+    R_BS, wrench = read_poses_csv(args.poses)
+    try:
+        cal = identify_gravity(R_BS, wrench, g_B)
+    except IdentificationError as exc:
+        raise InputFileError(args.poses, "", str(exc)) from None
+    g = float(np.linalg.norm(g_B))
+    print(
+        f"identified from {cal.n_poses} poses in {args.poses} "
+        f"(gravity {_fmt(g_B, 3)} m/s², condition number {cal.condition_number:.3g})"
+    )
+    print(
+        f"  mass            {cal.mass_kg:.5f} ± {cal.mass_se_kg:.5f} kg   "
+        f"(mg = {cal.mass_kg * g:.4f} N)"
+    )
+    print(f"  centre of mass  {_fmt(cal.com_m)} ± {_fmt(cal.com_se_m, signed=False)} m")
+    print(
+        f"  force bias      {_fmt(cal.force_bias_N, 4)} ± {_fmt(cal.force_bias_se_N, 4, False)} N"
+    )
+    print(
+        f"  torque bias     {_fmt(cal.torque_bias_Nm, 5)} ± {_fmt(cal.torque_bias_se_Nm, 5, False)} N·m"
+    )
+    print("  residuals          fx       fy       fz       tx       ty       tz   (N, N·m)")
+    for label, values in (
+        ("RMS before", cal.residual_rms_before),
+        ("max before", cal.residual_max_before),
+        ("RMS after ", cal.residual_rms_after),
+        ("max after ", cal.residual_max_after),
+    ):
+        print(f"  {label}  " + " ".join(f"{v:8.4f}" for v in values))
+    print("  (before: reading minus the identified bias; after: minus the tool-weight model too)")
+    write_calibration(args.out, cal)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def run_command(args: argparse.Namespace) -> int | None:
+    """Run a co-simulation command if `args` names one; None otherwise."""
+    if args.command == "identify-gravity":
+        return _identify_gravity(args)
+    if args.command == "build-fmus":
+        return _build_fmus(args)
+    if args.command == "export":
+        return _export(args)
+    return None
