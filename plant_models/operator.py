@@ -44,7 +44,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from hoh_cosim.control.block import Port
+from hoh_cosim.control.block import TWIST_UNITS, Port
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, as_vector, frozen
 from hoh_cosim.errors import ConfigError
 
@@ -172,7 +172,7 @@ class Operator:
 
     inputs: ClassVar[tuple[Port, ...]] = (
         Port("p_BT_B", 3, "m", "probe tip position in the base frame"),
-        Port("twist_B", 6, ("m/s",) * 3 + ("rad/s",) * 3, "probe tip twist in the base frame"),
+        Port("twist_B", 6, TWIST_UNITS, "probe tip twist in the base frame"),
         Port("F_contact_B", 3, "N", "force of the phantom on the probe tip, in B"),
     )
     outputs: ClassVar[tuple[Port, ...]] = (

@@ -34,7 +34,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hoh_cosim.control.block import Port
+from hoh_cosim.control.block import TWIST_UNITS, Port
 from hoh_cosim.control.vectors import GRAVITY_B, Vec, Vec3, as_scalar, as_vector, frozen
 from hoh_cosim.errors import ConfigError
 from plant_models.tissue import PhantomParams, contact_force
@@ -196,9 +196,6 @@ class PandaParams:
             )
 
 
-_TWIST_UNITS = ("m/s",) * 3 + ("rad/s",) * 3
-
-
 class PandaPlant:
     """The Panda, the probe and the phantom under the block contract; torque in, state and model out.
 
@@ -214,7 +211,7 @@ class PandaPlant:
         Port("tau_J", 7, "N.m", "joint torques applied: the clamped command plus gravity"),
         Port("p_BT_B", 3, "m", "TCP (probe tip) position in the base frame"),
         Port("R_BT", 9, "1", "TCP orientation in the base frame, row by row"),
-        Port("twist_B", 6, _TWIST_UNITS, "TCP twist [v; ω] in the base frame"),
+        Port("twist_B", 6, TWIST_UNITS, "TCP twist [v; ω] in the base frame"),
         Port("B", 49, "1", "joint-space mass matrix B(q), row by row [kg·m², kg·m, kg]"),
         Port("C", 7, "N.m", "Coriolis and centrifugal torques C(q, q̇) q̇"),
         Port("F", 7, "N.m", "the friction model's torques at q̇"),

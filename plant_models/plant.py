@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hoh_cosim.control.block import WRENCH_UNITS, Port
+from hoh_cosim.control.block import TWIST_UNITS, WRENCH_UNITS, Port
 from hoh_cosim.control.vectors import GRAVITY_B, Vec, Vec3, as_vector
 from plant_models.arm import ArmParams, SpeedLArm
 from plant_models.tissue import PhantomParams, contact_force
@@ -26,8 +26,6 @@ from plant_models.tool import ToolLoads, ToolModel
 from plant_models.ur5 import FramePlacement, UR5Model
 
 __all__ = ["Plant", "PlantParams"]
-
-_TWIST_UNITS = ("m/s",) * 3 + ("rad/s",) * 3
 
 
 @dataclass(frozen=True)
@@ -48,7 +46,7 @@ class Plant:
     """UR5 + tool + phantom under the block contract."""
 
     inputs: ClassVar[tuple[Port, ...]] = (
-        Port("twist_cmd_B", 6, _TWIST_UNITS, "speedL command: TCP twist [v; ω] in the base frame"),
+        Port("twist_cmd_B", 6, TWIST_UNITS, "speedL command: TCP twist [v; ω] in the base frame"),
         Port("F_hand_B", 3, "N", "force of the hand on the handle, in B"),
         Port("tau_hand_B", 3, "N.m", "torque of the hand on the handle (about the handle), in B"),
         Port(
@@ -58,7 +56,7 @@ class Plant:
     outputs: ClassVar[tuple[Port, ...]] = (
         Port("p_BT_B", 3, "m", "TCP (probe tip) position in the base frame"),
         Port("R_BT", 9, "1", "TCP orientation in the base frame, row by row"),
-        Port("twist_B", 6, _TWIST_UNITS, "actual TCP twist [v; ω] in the base frame"),
+        Port("twist_B", 6, TWIST_UNITS, "actual TCP twist [v; ω] in the base frame"),
         Port("q", 6, "rad", "joint positions"),
         Port("qd", 6, "rad/s", "joint velocities"),
         Port("p_BS_B", 3, "m", "wrist sensor position in the base frame"),

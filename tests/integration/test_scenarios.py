@@ -10,7 +10,7 @@ import pytest
 
 from hoh_cosim.calibration import read_calibration
 from hoh_cosim.cli import main
-from hoh_cosim.control.limits import Status
+from hoh_cosim.control.supervisor import Status
 from hoh_cosim.cosim.engines import simulate
 from hoh_cosim.cosim.scenario import load_scenario
 

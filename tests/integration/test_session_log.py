@@ -38,7 +38,7 @@ ROWS = 40
 DT = 0.002
 CYCLE_TOPICS = ("/robot", "/ft150", "/fse103", "/estimate", "/command", "/timing")
 
-# /command.status as the flags' values (limits.Status) and the status_text each must give
+# /command.status as the flags' values (supervisor.Status) and the status_text each must give
 STATUSES = [
     (0, "ok"),
     (1, "speed clamped"),

@@ -11,7 +11,7 @@ from hoh_cosim.control.admittance import TRANSLATION_GAINS
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
 from hoh_cosim.control.gravity import ToolParams
-from hoh_cosim.control.limits import Status
+from hoh_cosim.control.supervisor import Status
 from plant_models.operator import Operator, OperatorParams
 from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Sensor

@@ -9,7 +9,7 @@ import pytest
 
 from hoh_cosim.control.block import zero_inputs
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
-from hoh_cosim.control.limits import LimitParams, Status
+from hoh_cosim.control.supervisor import LimitParams, Status
 from hoh_cosim.errors import ConfigError
 
 DT = 2e-3  # a 500 Hz robot

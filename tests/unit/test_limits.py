@@ -8,15 +8,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hoh_cosim.control.limits import (
-    STOP_FLAGS,
-    LimitParams,
-    Status,
     clamp_acceleration,
     clamp_speed,
     is_stale,
     probe_force_limit,
     workspace_limit,
 )
+from hoh_cosim.control.supervisor import STOP_FLAGS, LimitParams, Status
 from hoh_cosim.errors import ConfigError
 
 vectors = st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3).map(np.array)

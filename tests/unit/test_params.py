@@ -12,8 +12,8 @@ import pytest
 from hoh_cosim.control.controller import ControllerParams
 from hoh_cosim.control.estimator import EstimatorParams
 from hoh_cosim.control.frames import R_SP_SEED
-from hoh_cosim.control.limits import LimitParams
 from hoh_cosim.control.sequencer import SequencerParams
+from hoh_cosim.control.supervisor import LimitParams
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import Leaf, from_mapping, leaves, override, with_values
 from plant_models.sensors import FT150Params, HousingParams

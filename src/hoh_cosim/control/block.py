@@ -24,6 +24,7 @@ from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError
 
 __all__ = [
+    "TWIST_UNITS",
     "WRENCH_UNITS",
     "Block",
     "Port",
@@ -34,7 +35,9 @@ __all__ = [
     "zero_inputs",
 ]
 
+# Units of a wrench [f; τ] and of a twist [v; ω], element by element; defined once for every port.
 WRENCH_UNITS = ("N", "N", "N", "N.m", "N.m", "N.m")
+TWIST_UNITS = ("m/s",) * 3 + ("rad/s",) * 3
 
 
 @dataclass(frozen=True)

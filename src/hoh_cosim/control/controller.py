@@ -2,22 +2,23 @@
 
 Per tick:
 
-    checks     non-finite input (latched) · estimator not ready · stale FT-150 or probe data ·
-               probe force at the stop limit (latched)            → any of these: zero twist, stop flag
+    checks     the supervisor's `check_inputs`: non-finite input (latched) · estimator not ready ·
+               stale FT-150 or probe data · probe force at the stop limit (latched)
+                                                                  → any of these: zero twist, stop flag
     law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on); v = law(F̃) (eq. 10 or
                an alternative), ω = law(τ_hand)
     fixture    while |F_probe| > threshold no upward motion (3.F.3, if on)
-    limits     speed clamp · acceleration clamp · probe-force soft cap · workspace box
+    limits     the supervisor's `limit_command`: speed clamp · acceleration clamp · probe-force
+               soft cap · workspace box
 
 The order puts the hard limits last: the soft force cap and the workspace box override the
 acceleration clamp, never the other way round. The output is a TCP twist [v; ω] in the base frame with
-UR speedL semantics, and a `Status` (see `hoh_cosim.control.limits`) whose `ok` the runner obeys.
+UR speedL semantics, and a `Status` (see `hoh_cosim.control.supervisor`) whose `ok` the runner obeys.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -32,32 +33,21 @@ from hoh_cosim.control.admittance import (
     contact_compensated,
     horizontal_fixture,
 )
-from hoh_cosim.control.block import Port
-from hoh_cosim.control.limits import (
+from hoh_cosim.control.block import TWIST_UNITS, Port
+from hoh_cosim.control.supervisor import (
+    LATCHED_FLAGS,
     STOP_FLAGS,
     LimitParams,
     Status,
-    clamp_acceleration,
-    clamp_speed,
-    is_stale,
-    probe_force_limit,
-    workspace_limit,
+    check_inputs,
+    limit_command,
 )
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, frozen
 
 __all__ = ["ControllerParams", "HandGuidingController"]
 
-_NONFINITE = int(Status.NONFINITE)
-_NOT_READY = int(Status.NOT_READY)
-_STALE_FT = int(Status.STALE_FT)
-_STALE_PROBE = int(Status.STALE_PROBE)
-_FORCE_STOP = int(Status.FORCE_STOP)
 _FIXTURE = int(Status.FIXTURE)
-_SPEED_CLAMPED = int(Status.SPEED_CLAMPED)
-_ACCEL_CLAMPED = int(Status.ACCEL_CLAMPED)
-_FORCE_SOFT_CAP = int(Status.FORCE_SOFT_CAP)
-_WORKSPACE = int(Status.WORKSPACE)
-_LATCHED = _FORCE_STOP | _NONFINITE
+_LATCHED = int(LATCHED_FLAGS)
 _STOP = int(STOP_FLAGS)
 
 
@@ -126,16 +116,16 @@ class HandGuidingController:
         Port(
             "twist_B",
             6,
-            ("m/s",) * 3 + ("rad/s",) * 3,
+            TWIST_UNITS,
             "commanded TCP twist [v; ω] in the base frame (speedL)",
         ),
         Port(
             "twist_law_B",
             6,
-            ("m/s",) * 3 + ("rad/s",) * 3,
+            TWIST_UNITS,
             "the admittance law's twist before the fixture and the limits",
         ),
-        Port("status", 1, "1", "Status flags of this tick (hoh_cosim.control.limits.Status)"),
+        Port("status", 1, "1", "Status flags of this tick (hoh_cosim.control.supervisor.Status)"),
     )
 
     def __init__(self, params: ControllerParams | None = None) -> None:
@@ -167,38 +157,16 @@ class HandGuidingController:
         """The flags of the last step."""
         return Status(self._bits)
 
-    # Status bits are plain ints in the hot path: IntFlag arithmetic costs a microsecond a time.
-    def _checks(self, inputs: Mapping[str, Vec]) -> int:
-        p = self.params
-        status = self._latched
-        F, tau, F_probe, p_BT = (
-            inputs["F_hand_B"],
-            inputs["tau_hand_B"],
-            inputs["F_probe_B"],
-            inputs["p_BT_B"],
-        )
-        ft_age, probe_age = float(inputs["ft_age"][0]), float(inputs["probe_age"][0])
-        ready = float(inputs["ready"][0])
-        probe_sq = float(F_probe @ F_probe)
-        # a NaN or an infinity anywhere makes this sum non-finite (so does an overflow: also a fault)
-        total = float(F @ F) + float(tau @ tau) + probe_sq + float(p_BT @ p_BT)
-        if not math.isfinite(total + ft_age + probe_age + ready):
-            return status | _NONFINITE
-        if ready < 0.5:
-            status |= _NOT_READY
-        if is_stale(ft_age, p.ft_period_s, p.limits.stale_periods):
-            status |= _STALE_FT
-        if p.use_probe:
-            if is_stale(probe_age, p.probe_period_s, p.limits.stale_periods):
-                status |= _STALE_PROBE
-            if math.sqrt(probe_sq) >= p.limits.probe_force_stop:
-                status |= _FORCE_STOP
-        return status
-
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         p = self.params
         lim = p.limits
-        status = self._checks(inputs)
+        status = self._latched | check_inputs(
+            inputs,
+            lim,
+            ft_period_s=p.ft_period_s,
+            probe_period_s=p.probe_period_s,
+            use_probe=p.use_probe,
+        )
         self._latched |= status & _LATCHED
         if status & _STOP:
             self._v_prev = np.zeros(3)
@@ -226,21 +194,18 @@ class HandGuidingController:
             v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, p.fixture_up_B)
             if engaged:
                 status |= _FIXTURE
-        v, hit_v = clamp_speed(v, lim.max_linear_speed)
-        w, hit_w = clamp_speed(w, lim.max_angular_speed)
-        if hit_v or hit_w:
-            status |= _SPEED_CLAMPED
-        v, hit_v = clamp_acceleration(v, self._v_prev, dt, lim.max_linear_accel)
-        w, hit_w = clamp_acceleration(w, self._w_prev, dt, lim.max_angular_accel)
-        if hit_v or hit_w:
-            status |= _ACCEL_CLAMPED
-        if p.use_probe:
-            v, hit = probe_force_limit(v, F_probe, lim.probe_force_soft_cap)
-            if hit:
-                status |= _FORCE_SOFT_CAP
-        v, hit = workspace_limit(v, inputs["p_BT_B"], *self._box)
-        if hit:
-            status |= _WORKSPACE
+        v, w, clamped = limit_command(
+            v,
+            w,
+            self._v_prev,
+            self._w_prev,
+            dt,
+            F_probe if p.use_probe else None,
+            inputs["p_BT_B"],
+            lim,
+            self._box,
+        )
+        status |= clamped
 
         self._v_prev, self._w_prev = v, w
         self._bits = status

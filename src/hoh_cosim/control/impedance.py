@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hoh_cosim.control.block import Port
+from hoh_cosim.control.block import TWIST_UNITS, Port
 from hoh_cosim.control.frames import matrix_to_rotvec
 from hoh_cosim.control.vectors import (
     Rot3,
@@ -60,7 +60,6 @@ __all__ = [
     "rpy_rate_matrix",
 ]
 
-_TWIST_UNITS = ("m/s",) * 3 + ("rad/s",) * 3
 _POSE_UNITS = ("m",) * 3 + ("rad",) * 3
 
 
@@ -284,7 +283,7 @@ class PositionImpedance:
         Port("ready", 1, "1", "1 once the force measurement is valid"),
     )
     outputs: ClassVar[tuple[Port, ...]] = (
-        Port("twist_B", 6, _TWIST_UNITS, "speedL command [v; ω] in the base frame"),
+        Port("twist_B", 6, TWIST_UNITS, "speedL command [v; ω] in the base frame"),
         *_ERROR_PORTS,
     )
 

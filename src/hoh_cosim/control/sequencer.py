@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hoh_cosim.control.block import Port
+from hoh_cosim.control.block import TWIST_UNITS, Port
 from hoh_cosim.control.frames import matrix_to_rotvec, rotvec_to_matrix
 from hoh_cosim.control.limits import clamp_speed
 from hoh_cosim.control.vectors import Rot3, Vec, as_scalar
@@ -133,9 +133,7 @@ class PoseSequencer:
         Port("R_BT", 9, "1", "TCP orientation in the base frame, row by row"),
     )
     outputs: ClassVar[tuple[Port, ...]] = (
-        Port(
-            "twist_B", 6, ("m/s",) * 3 + ("rad/s",) * 3, "speedL command [v; ω] in the base frame"
-        ),
+        Port("twist_B", 6, TWIST_UNITS, "speedL command [v; ω] in the base frame"),
         Port("pose_index", 1, "1", "the pose being visited, from 1"),
         Port("holding", 1, "1", "1 while the robot holds still for averaging, else 0"),
         Port("done", 1, "1", "1 once every pose has been held"),

@@ -14,7 +14,12 @@ import numpy as np
 
 from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import Report
-from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
+from hoh_cosim.cosim.scenario import (
+    TELEECHO_ARMS,
+    TELEECHO_CONTROLLERS,
+    ComponentSpec,
+    Scenario,
+)
 
 __all__ = ["gravity_residual_figure", "png", "pyplot", "render_plots"]
 
@@ -221,8 +226,8 @@ def _release(scenario: Scenario, rec: Recording, report: Report) -> dict[str, by
 def _teleecho(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
     """Seed 001's Fig. 13: pose error and its norms, joint torques (the UR5: its speedL command),
     and the contact force."""
-    plant = scenario.component_of_kind("panda") or scenario.component_of_kind("plant")
-    ctl = scenario.component_of_kind("impedance") or scenario.component_of_kind("ur5_impedance")
+    plant = scenario.component_of_kinds(TELEECHO_ARMS)
+    ctl = scenario.component_of_kinds(TELEECHO_CONTROLLERS)
     error, norm = _get(rec, ctl, "pose_error"), _get(rec, ctl, "pose_error_norm")
     contact, depth = _get(rec, plant, "F_contact_B"), _get(rec, plant, "penetration")
     if error is None or norm is None or contact is None or depth is None:
@@ -319,7 +324,14 @@ def _fmt(value: float | None, scale: float, unit: str) -> str:
     return "n/a" if value is None else f"{scale * value:.3g} {unit}"
 
 
+def _no_plots(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
+    """The 'none' set: no plots."""
+    return {}
+
+
+# One entry per metric set of `METRIC_SETS` (scenario.py), which a unit test checks.
 _PLOTS: dict[str, Callable[[Scenario, Recording, Report], dict[str, bytes]]] = {
+    "none": _no_plots,
     "circles": _circles,
     "static_noise": _static_noise,
     "gravity_calibration": _gravity_calibration,
@@ -332,5 +344,4 @@ _PLOTS: dict[str, Callable[[Scenario, Recording, Report], dict[str, bytes]]] = {
 
 def render_plots(scenario: Scenario, rec: Recording, report: Report) -> dict[str, bytes]:
     """PNG file name -> contents, for the scenario's metric set (none for 'none')."""
-    render = _PLOTS.get(scenario.metrics)
-    return render(scenario, rec, report) if render is not None else {}
+    return _PLOTS[scenario.metrics](scenario, rec, report)

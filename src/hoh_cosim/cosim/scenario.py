@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim.control.block import Port
+from hoh_cosim.control.cycle import SensorSetup
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.kinds import KINDS, ComponentKind
 from hoh_cosim.params import from_mapping, leaves, override
@@ -48,6 +49,8 @@ from hoh_cosim.yamlfile import Where, parse_value, read_yaml
 
 __all__ = [
     "METRIC_SETS",
+    "TELEECHO_ARMS",
+    "TELEECHO_CONTROLLERS",
     "ComponentSpec",
     "Connection",
     "Event",
@@ -56,6 +59,10 @@ __all__ = [
     "parse_endpoint",
 ]
 
+TELEECHO_ARMS = ("panda", "plant")
+"""The kinds of arm a teleecho scenario may have, in the order the report looks for them."""
+TELEECHO_CONTROLLERS = ("impedance", "ur5_impedance")
+"""The kinds of impedance controller a teleecho scenario may have, in the same order of search."""
 METRIC_SETS: dict[str, tuple[str | tuple[str, ...], ...]] = {
     "none": (),
     "circles": ("operator", "plant", "estimator"),
@@ -63,11 +70,12 @@ METRIC_SETS: dict[str, tuple[str | tuple[str, ...], ...]] = {
     "gravity_calibration": ("sequencer", "plant", "ft150"),
     "contact_scan": ("operator", "plant"),
     "release": ("operator", "plant"),
-    "teleecho": (("panda", "plant"), ("impedance", "ur5_impedance")),
+    "teleecho": (TELEECHO_ARMS, TELEECHO_CONTROLLERS),
     "probe_data": ("estimator", "fse103", "plant"),
 }
 """Each metric set (see `hoh_cosim.cosim.report`) and the kinds of component it reads (a tuple:
-any one of those kinds)."""
+any one of those kinds). The one list of metric sets: the report's and the plots' tables have one
+entry per key (tests/unit/test_closed_sets.py)."""
 _TOP_KEYS = (
     "extends",
     "name",
@@ -151,6 +159,10 @@ class Scenario:
 
     def component_of_kind(self, kind: str) -> ComponentSpec | None:
         return next((c for c in self.components.values() if c.kind.name == kind), None)
+
+    def component_of_kinds(self, kinds: Sequence[str]) -> ComponentSpec | None:
+        """A component of the first of `kinds` that the scenario has."""
+        return next((c for k in kinds if (c := self.component_of_kind(k)) is not None), None)
 
 
 def component_seed(scenario_seed: int, name: str) -> int:
@@ -305,6 +317,7 @@ def load_scenario(
         components[component] = dataclasses.replace(spec, params=new)
 
     connections, fed = _connections(raw.get("connections") or [], components, w)
+    _share_sensors(components, connections, w)
     defaults = _input_defaults(raw.get("inputs") or {}, components, w)
     for comp in components.values():
         for port in comp.inputs:
@@ -379,6 +392,24 @@ def _connections(
             fed[key] = i
         out.append(Connection(src, src_port.name, src_el, dst, dst_port.name, dst_el))
     return out, fed
+
+
+def _share_sensors(
+    components: dict[str, ComponentSpec], connections: Sequence[Connection], w: Where
+) -> None:
+    """A controller fed by an estimator sees the rig's sensors as the estimator does: the packet
+    periods and `use_probe` are given once, in the estimator's parameters."""
+    for src, dst in dict.fromkeys((c.src, c.dst) for c in connections):
+        estimator, controller = components[src], components[dst]
+        if estimator.kind.name != "estimator" or controller.kind.name != "controller":
+            continue
+        names = (f"components.{src}.params", f"components.{dst}.params")
+        try:
+            sensors = SensorSetup.shared(estimator.params, controller.params, names)
+        except ConfigError as exc:
+            raise w.error("", str(exc)) from None
+        _, params = sensors.apply(estimator.params, controller.params)
+        components[dst] = dataclasses.replace(controller, params=params)
 
 
 def _input_defaults(

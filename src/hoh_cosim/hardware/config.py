@@ -22,7 +22,8 @@
       tolerance_N: 2.0            # mean minus (weight + calibrated offset) must stay within these
       tolerance_Nm: 0.2
       timeout_s: 15.0
-    estimator: {...}              # EstimatorParams overrides (the tool comes from the calibration)
+    estimator: {...}              # EstimatorParams overrides (the tool comes from the calibration);
+                                  # its packet periods and use_probe are the rig's, for both blocks
     controller: {...}             # ControllerParams overrides (gains, limits, fixture, ...)
     log_dir: sessions             # session logs (MCAP), path from this file
     stale_stop_s: 0.25            # a stream silent this long ends the session; a shorter gap
@@ -42,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim.control.controller import ControllerParams
+from hoh_cosim.control.cycle import SensorSetup
 from hoh_cosim.control.estimator import EstimatorParams
 from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.vectors import Rot3
@@ -216,9 +218,6 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConf
     try:
         estimator = from_mapping(EstimatorParams(), raw.get("estimator") or {}, "estimator")
         controller = from_mapping(ControllerParams(), raw.get("controller") or {}, "controller")
-        if probe_config is None:  # no probe sensor: no compensation, fixture or contact limits
-            estimator = dataclasses.replace(estimator, use_probe=False)
-            controller = dataclasses.replace(controller, use_probe=False)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     log_dir = here / w.string(raw.get("log_dir", "sessions"), "log_dir")
@@ -233,6 +232,15 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConf
         params[block] = override(
             params[block], param_path, parse_value(text, value_text), f"--set {block}"
         )
+    try:
+        sensors = SensorSetup.shared(params["estimator"], params["controller"])
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    if probe_config is None:  # no probe sensor: no compensation, fixture or contact limits
+        sensors = dataclasses.replace(sensors, use_probe=False)
+    params["estimator"], params["controller"] = sensors.apply(
+        params["estimator"], params["controller"]
+    )
     return HardwareConfig(
         path,
         robot_config,

@@ -19,7 +19,9 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
+from hoh_cosim.control.cycle import ControlBlocks, Reading, control_cycle
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.supervisor import SessionPolicy
 from hoh_cosim.errors import ConfigError, InputFileError
 from hoh_cosim.hardware.session_log import Session, read_session
 from hoh_cosim.params import override, with_values
@@ -101,36 +103,33 @@ def replay(path: str | Path, overrides: Sequence[str] = ()) -> ReplayResult:
     cycles = sorted(k for k in commands if k in robot and k in estimates)
     if not cycles:
         raise InputFileError(session.path, "/command", "no control cycle was recorded")
-    estimator = Estimator(params["estimator"])
-    controller = HandGuidingController(params["controller"])
+    blocks = ControlBlocks(
+        Estimator(params["estimator"]),
+        HandGuidingController(params["controller"]),
+        SessionPolicy(params["controller"].limits),
+    )
     old: dict[str, list[Any]] = {"F_hand_B": [], "twist_B": [], "status": []}
     new: dict[str, list[Any]] = {"F_hand_B": [], "twist_B": [], "status": []}
     t_list = []
     for k in cycles:
-        r = robot[k]
-        f = ft.get(k)
-        pr = probe.get(k)
+        r, f, pr = robot[k], ft.get(k), probe.get(k)
         t = k * period
-        R_BT = _vector(r["R_BT"]).reshape(3, 3)
-        estimate = estimator.step(
-            t,
-            period,
-            {
-                "wrench_S": _vector(f["wrench_S"]) if f else np.zeros(6),
-                "ft_counter": np.array([float(f["count"]) if f else 0.0]),
-                "force_P": _vector(pr["force_P"]) if pr else np.zeros(3),
-                "probe_counter": np.array([float(pr["count"]) if pr else 0.0]),
-                "R_BS": (R_BT @ R_TS).reshape(9),
-            },
+        reading = Reading(
+            _vector(r["p_BT_B"]),
+            _vector(r["R_BT"]).reshape(3, 3) @ R_TS,
+            _vector(f["wrench_S"]) if f else None,
+            int(f["count"]) if f else 0,
+            _vector(pr["force_P"]) if pr else None,
+            int(pr["count"]) if pr else 0,
         )
-        out = controller.step(t, period, {**estimate, "p_BT_B": _vector(r["p_BT_B"])})
+        cycle = control_cycle(blocks, reading, t, period)
         t_list.append(t)
         old["F_hand_B"].append(_vector(estimates[k]["F_hand_B"]))
         old["twist_B"].append(_vector(commands[k]["twist_B"]))
         old["status"].append(int(commands[k]["status"]))
-        new["F_hand_B"].append(estimate["F_hand_B"].copy())
-        new["twist_B"].append(out["twist_B"].copy())
-        new["status"].append(int(out["status"][0]))
+        new["F_hand_B"].append(cycle.estimate["F_hand_B"].copy())
+        new["twist_B"].append(cycle.command["twist_B"].copy())
+        new["status"].append(int(cycle.command["status"][0]))
     return ReplayResult(
         session,
         np.array(t_list),

@@ -38,14 +38,15 @@ from typing import Any, Protocol
 import numpy as np
 
 from hoh_cosim.control.controller import HandGuidingController
+from hoh_cosim.control.cycle import ControlBlocks, Reading, SensorSetup, control_cycle
 from hoh_cosim.control.estimator import Estimator
 from hoh_cosim.control.gravity import GravityCalibration, GravityModel
-from hoh_cosim.control.limits import Status
+from hoh_cosim.control.supervisor import SessionPolicy, robot_cause
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.config import HardwareConfig
 from hoh_cosim.hardware.robot import Robot, RobotState
-from hoh_cosim.hardware.session_log import SessionLog
+from hoh_cosim.hardware.session_log import CycleRecord, SessionLog
 from hoh_cosim.hardware.streams import Mailbox, ReaderThread, Sample
 from hoh_cosim.params import leaves
 
@@ -234,7 +235,7 @@ class Runner:
 
     def blocks(self, rebias: Rebias) -> tuple[Estimator, HandGuidingController]:
         """The estimator and controller for this session: the calibrated tool, the measured
-        biases (no further rebias) and the measured packet periods."""
+        biases (no further rebias) and the measured packet periods, given to both blocks."""
         estimator_params = dataclasses.replace(
             self.config.estimator,
             tool=self.calibration.tool,
@@ -244,68 +245,30 @@ class Runner:
             probe_rebias_packets=0,
             probe_bias=rebias.probe_bias,
         )
-        controller_params = self.config.controller
-        if math.isfinite(rebias.ft_period_s):
-            estimator_params = dataclasses.replace(
-                estimator_params, ft_packet_period_s=rebias.ft_period_s
-            )
-            controller_params = dataclasses.replace(
-                controller_params, ft_period_s=rebias.ft_period_s
-            )
-        if math.isfinite(rebias.probe_period_s):
-            estimator_params = dataclasses.replace(
-                estimator_params, probe_packet_period_s=rebias.probe_period_s
-            )
-            controller_params = dataclasses.replace(
-                controller_params, probe_period_s=rebias.probe_period_s
-            )
+        # the measured periods, where the rebias could measure them; else the configured ones
+        configured = SensorSetup.of(estimator_params)
+        ft_period, probe_period = rebias.ft_period_s, rebias.probe_period_s
+        sensors = SensorSetup(
+            ft_period if math.isfinite(ft_period) else configured.ft_period_s,
+            probe_period if math.isfinite(probe_period) else configured.probe_period_s,
+            configured.use_probe,
+        )
+        estimator_params, controller_params = sensors.apply(
+            estimator_params, self.config.controller
+        )
         return Estimator(estimator_params), HandGuidingController(controller_params)
 
+    def policy(self) -> SessionPolicy:
+        """The supervisor's policy for this session's devices and limits."""
+        return SessionPolicy(
+            limits=self.config.controller.limits,
+            stale_stop_s=self.config.stale_stop_s,
+            robot=self.robot.describe(),
+            ft=self.ft.describe(),
+            probe=self.probe.describe() if self.probe is not None else None,
+        )
+
     # --- the loop --------------------------------------------------------------------------------
-
-    def _cause(
-        self, status: Status, estimate: dict[str, Vec], ft: Sample | None, probe: Sample | None
-    ) -> str | None:
-        """Why the session must stop now, or None (the supervisor, DESIGN.md §7)."""
-        if ft is not None and not np.all(np.isfinite(ft.values)):
-            return f"{self.ft.describe()} sent a non-finite value {np.round(ft.values, 3).tolist()}"
-        if probe is not None and not np.all(np.isfinite(probe.values)):
-            return (
-                f"{self.probe.describe()} sent a non-finite value "  # type: ignore[union-attr]
-                f"{np.round(probe.values, 3).tolist()}"
-            )
-        if status.ok:
-            return None
-        if status & Status.FORCE_STOP:
-            force = float(np.linalg.norm(estimate["F_probe_B"]))
-            return (
-                f"probe contact force {force:.1f} N reached the "
-                f"{self.config.controller.limits.probe_force_stop:g} N stop"
-            )
-        stale_stop = self.config.stale_stop_s
-        if status & Status.STALE_FT:
-            age = float(estimate["ft_age"][0])
-            if age < stale_stop:  # a gap: the controller commands zero meanwhile
-                return None
-            why = self.ft.mailbox.error or "the stream stalled"
-            return f"{self.ft.describe()}: no new sample for {1e3 * age:.0f} ms ({why})"
-        if status & Status.STALE_PROBE and self.probe is not None:
-            age = float(estimate["probe_age"][0])
-            if age < stale_stop:
-                return None
-            why = self.probe.mailbox.error or "the stream stalled"
-            return f"{self.probe.describe()}: no new sample for {1e3 * age:.0f} ms ({why})"
-        return f"the controller stopped: {status.describe()}"
-
-    def _check_command(self, twist: Vec) -> str | None:
-        """The command itself, checked again outside the controller."""
-        limits = self.config.controller.limits
-        if not np.all(np.isfinite(twist)):
-            return f"non-finite command {twist.tolist()}"
-        v, w = float(np.linalg.norm(twist[:3])), float(np.linalg.norm(twist[3:]))
-        if v > limits.max_linear_speed * (1 + 1e-9) or w > limits.max_angular_speed * (1 + 1e-9):
-            return f"command above the speed limits: {v:.4f} m/s, {w:.4f} rad/s"
-        return None
 
     def run(self, seconds: float | None = None) -> SessionResult:
         """Connect, rebias and guide until `seconds` pass, `stop_requested` is set or something goes
@@ -359,89 +322,56 @@ class Runner:
         controller: HandGuidingController,
         seconds: float | None,
     ) -> tuple[str, bool]:
+        """read → `control_cycle` → write, at the robot's rate."""
         period = self.robot.period_s
         n_max = None if seconds is None else round(seconds / period)
-        R_TS = self.config.robot.R_TS
-        acceleration = self.config.robot.acceleration
-        zero3 = np.zeros(3)
-        ft_counter, probe_counter = np.zeros(1), np.zeros(1)
-        k = 0
-        # rebiased already: the check, if any, starts now
-        checking = estimator.checking and self.probe is not None
-        drifted = False
+        blocks = ControlBlocks(estimator, controller, self.policy())
+        policy = blocks.policy
         overruns_before = pacer.overruns  # the rebias's own are not the loop's
+        k = 0
         while n_max is None or k < n_max:
             if self.stop_requested.is_set():
                 return "stopped on request", True
             late = pacer.wait()
             self.timing.overruns = pacer.overruns - overruns_before
             start = time.perf_counter()
-            t = k * period
             state = self.robot.state()
             problem = state.problem()
-            if problem is not None:
+            if problem is not None:  # the robot stopped itself: nothing to compute
                 self._event("stop", problem)
-                return f"{self.robot.describe()}: {problem}", False
+                return robot_cause(policy, problem), False
             ft, ft_count = self.ft.mailbox.latest()
             probe, probe_count = (
                 self.probe.mailbox.latest() if self.probe is not None else (None, 0)
             )
-            ft_counter[0], probe_counter[0] = ft_count, probe_count
-            estimate = estimator.step(
-                t,
+            cycle = control_cycle(
+                blocks,
+                Reading(
+                    state.p_BT_B,
+                    state.R_BT @ self.config.robot.R_TS,
+                    None if ft is None else ft.values,
+                    ft_count,
+                    None if probe is None else probe.values,
+                    probe_count,
+                ),
+                k * period,
                 period,
-                {
-                    "wrench_S": ft.values if ft is not None else np.zeros(6),
-                    "ft_counter": ft_counter,
-                    "force_P": probe.values if probe is not None else zero3,
-                    "probe_counter": probe_counter,
-                    "R_BS": (state.R_BT @ R_TS).reshape(9),
-                },
+                ft_error=self.ft.mailbox.error,
+                probe_error=self.probe.mailbox.error if self.probe is not None else None,
             )
-            out = controller.step(t, period, {**estimate, "p_BT_B": state.p_BT_B})
-            status = Status(int(out["status"][0]))
-            if checking and not estimator.checking:
-                checking = False
-                text = _check_text(estimator)
-                self._event("probe check", text)
-                self.announce(f"probe check done: {text}")
-            if checking:  # not ready by design: the controller commands zero, the robot holds
-                status &= ~Status.NOT_READY
-            if (estimate["probe_drift"][0] > 0.5) != drifted:
-                drifted = not drifted
-                mismatch = float(estimate["probe_mismatch"][0])
-                text = (
-                    f"the probe sensor disagrees with the wrist sensor by {mismatch:.1f} N across "
-                    "the probe: recheck it"
-                    if drifted
-                    else f"the two sensors agree again ({mismatch:.1f} N)"
-                )
-                self._event("probe drift", text)
-                self.announce(f"warning: {text}" if drifted else text)
-            cause = self._cause(status, estimate, ft, probe) or self._check_command(out["twist_B"])
-            sent = np.zeros(6) if cause else out["twist_B"]
+            for event in cycle.events:
+                self._event(event.name, event.detail)
+                self.announce(event.announcement)
+            cause = cycle.verdict.cause
             if cause is None:
-                self.robot.speed_l(sent, acceleration)
+                self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
                 self.robot.kick_watchdog()
             compute = time.perf_counter() - start
             self.timing.compute_s.append(compute)
             self.timing.late_s.append(late)
             if self.log is not None:
-                self._log_cycle(
-                    k,
-                    t,
-                    state,
-                    ft,
-                    ft_count,
-                    probe,
-                    probe_count,
-                    estimate,
-                    out,
-                    sent,
-                    status,
-                    compute,
-                    late,
-                )
+                self._k = k
+                self.log.record(CycleRecord(k, k * period, cycle, state, ft, probe, compute, late))
             if cause is not None:
                 self._event("stop", cause)
                 return cause, False
@@ -460,54 +390,6 @@ class Runner:
         self._event(
             "parameters", _parameters_json(estimator, controller, rebias, self.robot.period_s)
         )
-
-    def _log_cycle(
-        self,
-        k: int,
-        t: float,
-        state: RobotState,
-        ft: Sample | None,
-        ft_count: int,
-        probe: Sample | None,
-        probe_count: int,
-        estimate: dict[str, Vec],
-        out: dict[str, Vec],
-        sent: Vec,
-        status: Status,
-        compute: float,
-        late: float,
-    ) -> None:
-        log = self.log
-        assert log is not None
-        self._k = k
-        row = log.row
-        row.start(k, t, ft is not None, probe is not None)
-        row.set("/robot.p_BT_B", state.p_BT_B)
-        row.set("/robot.R_BT", state.R_BT.reshape(9))
-        row.set("/robot.twist_B", state.twist_B)
-        row.set("/robot.robot_mode", state.robot_mode)
-        row.set("/robot.safety_mode", state.safety_mode)
-        row.set("/robot.protective_stop", state.protective_stop)
-        row.set("/robot.emergency_stop", state.emergency_stop)
-        row.set("/robot.program_running", state.program_running)
-        if ft is not None:
-            row.set("/ft150.wrench_S", ft.values)
-            row.set("/ft150.count", ft_count)
-            row.set("/ft150.received_s", ft.received_s)
-        if probe is not None:
-            row.set("/fse103.force_P", probe.values)
-            row.set("/fse103.count", probe_count)
-            row.set("/fse103.received_s", probe.received_s)
-            row.set("/fse103.device_ms", -1 if probe.device_ms is None else probe.device_ms)
-        for name, value in estimate.items():
-            row.set(f"/estimate.{name}", value)
-        row.set("/command.twist_B", out["twist_B"])
-        row.set("/command.twist_law_B", out["twist_law_B"])
-        row.set("/command.status", int(status))
-        row.set("/command.sent_B", sent)
-        row.set("/timing.compute_s", compute)
-        row.set("/timing.late_s", late)
-        log.cycle()
 
 
 def _helper_threads() -> list[threading.Thread]:
@@ -559,13 +441,6 @@ def _realtime_interpreter(
         sys.setswitchinterval(previous)
         gc.enable()
         gc.unfreeze()
-
-
-def _check_text(estimator: Estimator) -> str:
-    online = estimator.correction.online
-    if online is None:
-        return f"{estimator.params.probe_correction.kind} correction: nothing to identify"
-    return f"online map identified from {online.updates} probe samples"
 
 
 def _rebias_text(rebias: Rebias) -> str:

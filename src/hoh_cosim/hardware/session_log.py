@@ -35,16 +35,22 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hoh_cosim import __version__
 from hoh_cosim.errors import InputFileError, RunError
 
+if TYPE_CHECKING:  # the writer process imports this module: it needs none of them
+    from hoh_cosim.control.cycle import Cycle
+    from hoh_cosim.hardware.robot import RobotState
+    from hoh_cosim.hardware.streams import Sample
+
 __all__ = [
     "CHANNELS",
     "CYCLE_LAYOUT",
+    "CycleRecord",
     "CycleRow",
     "Session",
     "SessionLog",
@@ -123,6 +129,51 @@ class CycleRow:
         self.values[:_HEAD] = (k, t, 1.0 if has_ft else 0.0, 1.0 if has_probe else 0.0)
 
 
+@dataclass(frozen=True)
+class CycleRecord:
+    """Everything the log keeps of one cycle of the runner."""
+
+    k: int
+    t: float  # [s] k times the period
+    cycle: Cycle  # what the control cycle read, estimated, commanded and decided
+    robot: RobotState  # the state the cycle read
+    ft: Sample | None  # the FT-150 and FSE103 samples it used (None: none yet)
+    probe: Sample | None
+    compute_s: float  # [s] from the cycle's start to the command sent
+    late_s: float  # [s] how late the cycle started
+
+    def fill(self, row: CycleRow) -> None:
+        """Write this record into a cycle row."""
+        state, ft, probe = self.robot, self.ft, self.probe
+        reading, verdict = self.cycle.reading, self.cycle.verdict
+        row.start(self.k, self.t, ft is not None, probe is not None)
+        row.set("/robot.p_BT_B", state.p_BT_B)
+        row.set("/robot.R_BT", state.R_BT.reshape(9))
+        row.set("/robot.twist_B", state.twist_B)
+        row.set("/robot.robot_mode", state.robot_mode)
+        row.set("/robot.safety_mode", state.safety_mode)
+        row.set("/robot.protective_stop", state.protective_stop)
+        row.set("/robot.emergency_stop", state.emergency_stop)
+        row.set("/robot.program_running", state.program_running)
+        if ft is not None:
+            row.set("/ft150.wrench_S", ft.values)
+            row.set("/ft150.count", reading.ft_count)
+            row.set("/ft150.received_s", ft.received_s)
+        if probe is not None:
+            row.set("/fse103.force_P", probe.values)
+            row.set("/fse103.count", reading.probe_count)
+            row.set("/fse103.received_s", probe.received_s)
+            row.set("/fse103.device_ms", -1 if probe.device_ms is None else probe.device_ms)
+        for name, value in self.cycle.estimate.items():
+            row.set(f"/estimate.{name}", value)
+        row.set("/command.twist_B", self.cycle.command["twist_B"])
+        row.set("/command.twist_law_B", self.cycle.command["twist_law_B"])
+        row.set("/command.status", int(verdict.status))
+        row.set("/command.sent_B", verdict.twist_B)
+        row.set("/timing.compute_s", self.compute_s)
+        row.set("/timing.late_s", self.late_s)
+
+
 def _schema(topic: str, properties: Mapping[str, Any]) -> bytes:
     schema = {
         "title": f"hoh-cosim {topic}",
@@ -156,7 +207,7 @@ def _messages(row: np.ndarray) -> list[tuple[str, dict[str, Any]]]:
         else:
             message[name] = _number(values[0], kind)
     if "/command" in out:
-        from hoh_cosim.control.limits import Status
+        from hoh_cosim.control.supervisor import Status
 
         out["/command"]["status_text"] = Status(out["/command"]["status"]).describe()
     return list(out.items())
@@ -331,6 +382,11 @@ class SessionLog:
             self._process.join(1.0)
             raise RunError(reply)
         return self
+
+    def record(self, record: CycleRecord) -> None:
+        """Log one cycle of the runner."""
+        record.fill(self.row)
+        self.cycle()
 
     def cycle(self) -> None:
         """Hand the filled `row` over: one copy into the ring."""

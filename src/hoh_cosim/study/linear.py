@@ -34,12 +34,14 @@ which it loses stability is α · (gain margin).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from hoh_cosim.control.baselines import one_euro_alpha
-from hoh_cosim.control.estimator import EstimatorParams
+from hoh_cosim.control.estimator import FILTER_KINDS, EstimatorParams, FilterKind
 from hoh_cosim.control.kalman import (
     H_FORCE,
     KalmanParams,
@@ -78,6 +80,48 @@ def _kalman_axis_system(params: KalmanParams, axis: int, dt: float, ticks: int):
     return control.ss(A @ I_KH, A @ K, M @ I_KH, M @ K, dt * ticks)
 
 
+def _kalman_system(params: EstimatorParams, axis: int, dt: float, ticks: int, signal_speed: float):
+    return _kalman_axis_system(params.hand_force_kalman, axis, dt, ticks)
+
+
+def _butterworth_system(
+    params: EstimatorParams, axis: int, dt: float, ticks: int, signal_speed: float
+):
+    import control
+    from scipy import signal as sps
+
+    b, a = sps.butter(params.butterworth.order, params.butterworth.cutoff_hz, fs=1.0 / dt)
+    return control.tf(b, a, dt)
+
+
+def _one_euro_system(
+    params: EstimatorParams, axis: int, dt: float, ticks: int, signal_speed: float
+):
+    import control
+
+    period = params.ft_packet_period_s
+    p = params.one_euro_force
+    cutoff = p.min_cutoff_hz + p.beta * abs(signal_speed)
+    alpha = float(one_euro_alpha(1.0 / period, cutoff))
+    return control.tf([alpha, 0.0], [1.0, alpha - 1.0], period)
+
+
+def _no_system(params: EstimatorParams, axis: int, dt: float, ticks: int, signal_speed: float):
+    """No filter: the held raw reading itself (gain 1)."""
+    return None
+
+
+# One model per estimator filter kind: the keys are FILTER_KINDS, which a unit test checks
+# (tests/unit/test_closed_sets.py). Both Kalman kinds are modelled by the same steady state.
+_FILTER_SYSTEMS: dict[FilterKind, Callable[[EstimatorParams, int, float, int, float], Any]] = {
+    "kalman": _kalman_system,
+    "steady_kalman": _kalman_system,
+    "butterworth": _butterworth_system,
+    "one_euro": _one_euro_system,
+    "none": _no_system,
+}
+
+
 def filter_system(
     params: EstimatorParams,
     axis: int = 0,
@@ -87,25 +131,14 @@ def filter_system(
 ):
     """The hand-force filter of `params` on sensor axis `axis` as a discrete python-control system
     (None for no filter). `signal_speed` [N/s] is where the 1€ filter is linearised."""
-    import control
-    from scipy import signal as sps
-
     kind = params.filter
     period = params.ft_packet_period_s
     ticks = round(period / dt)
     if ticks < 1 or not math.isclose(ticks * dt, period, rel_tol=1e-6):
         raise ConfigError(f"ft_packet_period_s: {period} s is not a whole number of {dt} s ticks")
-    if kind in ("kalman", "steady_kalman"):
-        return _kalman_axis_system(params.hand_force_kalman, axis, dt, ticks)
-    if kind == "butterworth":
-        b, a = sps.butter(params.butterworth.order, params.butterworth.cutoff_hz, fs=1.0 / dt)
-        return control.tf(b, a, dt)
-    if kind == "one_euro":
-        p = params.one_euro_force
-        cutoff = p.min_cutoff_hz + p.beta * abs(signal_speed)
-        alpha = float(one_euro_alpha(1.0 / period, cutoff))
-        return control.tf([alpha, 0.0], [1.0, alpha - 1.0], period)
-    return None
+    if kind not in _FILTER_SYSTEMS:
+        raise ConfigError(f"filter: expected one of {', '.join(FILTER_KINDS)}, got {kind!r}")
+    return _FILTER_SYSTEMS[kind](params, axis, dt, ticks, signal_speed)
 
 
 def filter_response(

@@ -1,0 +1,223 @@
+"""One control cycle, the same for the runner on the robot, its rehearsal and replay.
+
+    reading    what the devices gave this cycle: the TCP pose, the wrist sensor's orientation, the
+               newest raw FT-150 and FSE103 samples and how many of each have arrived
+    estimate   Estimator.step (predicts every cycle, corrects when a sample's counter moved)
+    command    HandGuidingController.step
+    verdict    the supervisor: send the command, send zero, or end the session with the cause
+    events     the probe check ending, the probe sensor drifting away from the wrist or back
+
+The caller does the I/O around it: the runner reads the robot and the mailboxes and writes speedL and
+the log, replay reads a session log. The packet periods and whether there is a probe sensor are
+facts of the rig, given once as a `SensorSetup` and passed to both blocks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hoh_cosim.control.controller import ControllerParams, HandGuidingController
+from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.supervisor import SessionPolicy, Status, Verdict, supervise
+from hoh_cosim.control.vectors import Rot3, Vec, Vec3, as_scalar
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["ControlBlocks", "Cycle", "Event", "Reading", "SensorSetup", "control_cycle"]
+
+
+@dataclass(frozen=True)
+class SensorSetup:
+    """The rig's sensors as the estimator and the controller must both see them."""
+
+    ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
+    probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
+    use_probe: bool = True  # False: no probe sensor
+
+    def __post_init__(self) -> None:
+        for name in ("ft_period_s", "probe_period_s"):
+            object.__setattr__(
+                self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
+            )
+
+    @classmethod
+    def of(cls, estimator: EstimatorParams) -> SensorSetup:
+        """The setup an estimator's parameters describe."""
+        return cls(
+            estimator.ft_packet_period_s, estimator.probe_packet_period_s, estimator.use_probe
+        )
+
+    @classmethod
+    def shared(
+        cls,
+        estimator: EstimatorParams,
+        controller: ControllerParams,
+        names: tuple[str, str] = ("estimator", "controller"),
+    ) -> SensorSetup:
+        """The setup of an estimator that feeds `controller`: the estimator's. A controller value
+        other than its default must agree with it (`names` name the two blocks in the error)."""
+        sensors = cls.of(estimator)
+        default = ControllerParams()
+        for name, estimator_name in _CONTROLLER_NAMES.items():
+            mine, theirs = getattr(controller, name), getattr(sensors, name)
+            if mine != theirs and mine != getattr(default, name):
+                raise ConfigError(
+                    f"{names[1]}.{name}: {mine} contradicts {names[0]}.{estimator_name}: {theirs} "
+                    f"(the sensors are given once, in the estimator's parameters)"
+                )
+        return sensors
+
+    def apply(
+        self, estimator: EstimatorParams, controller: ControllerParams
+    ) -> tuple[EstimatorParams, ControllerParams]:
+        """Both blocks' parameters with this setup."""
+        return (
+            dataclasses.replace(
+                estimator,
+                ft_packet_period_s=self.ft_period_s,
+                probe_packet_period_s=self.probe_period_s,
+                use_probe=self.use_probe,
+            ),
+            dataclasses.replace(
+                controller,
+                ft_period_s=self.ft_period_s,
+                probe_period_s=self.probe_period_s,
+                use_probe=self.use_probe,
+            ),
+        )
+
+
+# the controller's name of each sensor fact, and the estimator's
+_CONTROLLER_NAMES = {
+    "ft_period_s": "ft_packet_period_s",
+    "probe_period_s": "probe_packet_period_s",
+    "use_probe": "use_probe",
+}
+
+
+@dataclass
+class Reading:
+    """One cycle's raw inputs, as the devices gave them."""
+
+    p_BT_B: Vec3  # [m] the TCP's position
+    R_BS: Rot3  # the wrist sensor's orientation: the robot's R_BT times the mounting R_TS
+    ft: Vec | None  # the newest raw FT-150 wrench in S [N, N·m] (None: none yet)
+    ft_count: int  # FT-150 samples so far
+    probe: Vec | None = None  # the newest raw FSE103 force in P [N] (None: none yet, or no probe)
+    probe_count: int = 0
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something the session log records and the operator is told."""
+
+    name: str  # the log's event name
+    detail: str
+    announcement: str
+
+
+@dataclass
+class Cycle:
+    """What one cycle read, estimated, commanded and decided."""
+
+    reading: Reading
+    estimate: dict[str, Vec]
+    command: dict[str, Vec]  # the controller's outputs
+    verdict: Verdict
+    events: list[Event] = field(default_factory=list)
+
+    @property
+    def status(self) -> Status:
+        return self.verdict.status
+
+
+class ControlBlocks:
+    """The estimator, the controller and the supervisor's policy of one session, with the
+    session's own state: whether the probe check is still running, whether the probe drifted."""
+
+    def __init__(
+        self, estimator: Estimator, controller: HandGuidingController, policy: SessionPolicy
+    ) -> None:
+        self.estimator = estimator
+        self.controller = controller
+        self.policy = policy
+        # the probe check, if any, runs from the first cycle on (the rebias is over by then)
+        self.checking = estimator.checking and policy.probe is not None
+        self.drifted = False
+        # reused every cycle: the estimator reads them during its step only
+        self._ft_counter = np.zeros(1)
+        self._probe_counter = np.zeros(1)
+        self._no_wrench = np.zeros(6)
+        self._no_force = np.zeros(3)
+
+
+def control_cycle(
+    blocks: ControlBlocks,
+    reading: Reading,
+    t: float,
+    dt: float,
+    *,
+    ft_error: str | None = None,
+    probe_error: str | None = None,
+) -> Cycle:
+    """Estimator, controller and supervisor on one cycle's reading (the block contract's time:
+    `t` is the cycle number times `dt`). `ft_error` and `probe_error` are what the streams'
+    readers last reported, for the supervisor's message."""
+    estimator, controller = blocks.estimator, blocks.controller
+    blocks._ft_counter[0] = reading.ft_count
+    blocks._probe_counter[0] = reading.probe_count
+    estimate = estimator.step(
+        t,
+        dt,
+        {
+            "wrench_S": blocks._no_wrench if reading.ft is None else reading.ft,
+            "ft_counter": blocks._ft_counter,
+            "force_P": blocks._no_force if reading.probe is None else reading.probe,
+            "probe_counter": blocks._probe_counter,
+            "R_BS": reading.R_BS.reshape(9),
+        },
+    )
+    command = controller.step(t, dt, {**estimate, "p_BT_B": reading.p_BT_B})
+    events = _session_events(blocks, estimate)
+    verdict = supervise(
+        blocks.policy,
+        Status(int(command["status"][0])),
+        estimate,
+        command["twist_B"],
+        ft=reading.ft,
+        probe=reading.probe,
+        checking=blocks.checking,
+        ft_error=ft_error,
+        probe_error=probe_error,
+    )
+    return Cycle(reading, estimate, command, verdict, events)
+
+
+def _session_events(blocks: ControlBlocks, estimate: dict[str, Vec]) -> list[Event]:
+    events = []
+    if blocks.checking and not blocks.estimator.checking:
+        blocks.checking = False
+        text = _check_text(blocks.estimator)
+        events.append(Event("probe check", text, f"probe check done: {text}"))
+    if (estimate["probe_drift"][0] > 0.5) != blocks.drifted:
+        blocks.drifted = not blocks.drifted
+        mismatch = float(estimate["probe_mismatch"][0])
+        if blocks.drifted:
+            text = (
+                f"the probe sensor disagrees with the wrist sensor by {mismatch:.1f} N across "
+                "the probe: recheck it"
+            )
+            events.append(Event("probe drift", text, f"warning: {text}"))
+        else:
+            text = f"the two sensors agree again ({mismatch:.1f} N)"
+            events.append(Event("probe drift", text, text))
+    return events
+
+
+def _check_text(estimator: Estimator) -> str:
+    online = estimator.correction.online
+    if online is None:
+        return f"{estimator.params.probe_correction.kind} correction: nothing to identify"
+    return f"online map identified from {online.updates} probe samples"
