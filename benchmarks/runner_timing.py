@@ -27,7 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from hoh_cosim.rehearsal.rehearse import rehearse
+from hoh_cosim.rehearsal.rehearse import Rehearsal, rehearse
 
 
 def bare_pacing(seconds: float, period_s: float, priority: int | None) -> dict[str, float]:
@@ -67,12 +67,15 @@ def main(argv: list[str] | None = None) -> int:
     priority = None if args.rt_priority == "none" else int(args.rt_priority)
     notes: list[str] = []
     with tempfile.TemporaryDirectory(prefix="hoh-timing-") as tmp:
-        result = rehearse(
-            args.seconds,
-            Path(tmp) / "timing.mcap",
+        setup = Rehearsal(
+            seconds=args.seconds,
+            log_path=Path(tmp) / "timing.mcap",
             robot_rate_hz=args.rate,
             rebias_samples=args.rebias_samples,
             realtime_priority=priority,
+        )
+        result = rehearse(
+            setup,
             announce=lambda message: notes.append(message) if message.startswith("note") else None,
         )
     session = result.session

@@ -38,10 +38,10 @@ PNG = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def rehearsal(tmp_path_factory) -> RehearsalResult:
     """The one rehearsal of this module: 4 s of the circle task after a 100-sample rebias."""
-    from hoh_cosim.rehearsal.rehearse import rehearse  # POSIX only (ptys)
+    from hoh_cosim.rehearsal.rehearse import Rehearsal, rehearse  # POSIX only (ptys)
 
     path = tmp_path_factory.mktemp("rehearsal") / "s.mcap"
-    return rehearse(SECONDS, path, rebias_samples=100)
+    return rehearse(Rehearsal(seconds=SECONDS, log_path=path, rebias_samples=100))
 
 
 @pytest.fixture(scope="module")

@@ -19,10 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from hoh_cosim.errors import ConfigError, RunError
+from plant_models.operator import TASKS
 
 __all__ = ["add_commands", "run_command"]
-
-TASKS = ("off", "hold", "circle", "line", "press", "scan", "push_release")
 
 
 def _endpoint(text: str) -> tuple[str, int]:
@@ -51,6 +50,8 @@ def _fault(text: str) -> Any:
 
 def add_commands(sub: Any) -> None:
     """The `hw` and `replay` subcommands, on the main parser's subparsers."""
+    from hoh_cosim.rehearsal.world import FAULTS
+
     hw = sub.add_parser(
         "hw",
         help="run, calibrate, diagnose or rehearse on the robot",
@@ -146,7 +147,7 @@ def add_commands(sub: Any) -> None:
         default=[],
         type=_fault,
         metavar="KIND@S",
-        help="schedule a fault, e.g. ft_stall@12 (repeatable)",
+        help=f"schedule a fault, e.g. ft_stall@12 (repeatable); KIND: {', '.join(FAULTS)}",
     )
     rehearse.add_argument(
         "--log",
@@ -313,23 +314,24 @@ def _hw_sensors(args: argparse.Namespace) -> int:
 
 
 def _hw_rehearse(args: argparse.Namespace) -> int:
-    from hoh_cosim.rehearsal.rehearse import rehearse
+    from hoh_cosim.rehearsal.rehearse import Rehearsal, rehearse
 
     if not args.seconds > 0:
         raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")
     log_path = Path(args.log) if args.log else Path("sessions") / f"rehearsal-{_stamp()}.mcap"
     phantom = 0.03 if args.task in ("press", "scan") else None
-    result = rehearse(
-        args.seconds,
-        log_path,
+    setup = Rehearsal(
+        seconds=args.seconds,
+        log_path=log_path,
         task=args.task,
         robot_rate_hz=args.rate,
-        faults=args.faults,
+        faults=tuple(args.faults),
         rebias_samples=args.rebias_samples,
         phantom_below_m=phantom,
-        announce=_announce,
+        realtime_priority=args.rt_priority,
         ur_host=args.ur_emulator,
     )
+    result = rehearse(setup, announce=_announce)
     print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
     return _report(result.session, log_path)
 

@@ -3,14 +3,16 @@
 `hoh_cosim.rehearsal.world` serves an FT-150 stream on loopback and an FSE103 on a pseudo-terminal from
 a world process that moves the simulated arm in real time; the runner connects to them exactly as to
 a rig. The calibration is the world's truth (the tool and the FT-150's offset), as a perfect
-`hoh-cosim hw calibrate` would find it; `rehearse(calibrate=True)` runs the real calibration first.
+`hoh-cosim hw calibrate` would find it. What to rehearse is one record, `Rehearsal`:
+
+    rehearse(Rehearsal(seconds=20.0, log_path=Path("sessions/r.mcap"), task="line"))
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,7 +37,10 @@ from hoh_cosim.hardware.session_log import SessionLog
 from hoh_cosim.rehearsal.ur_controller import UrController
 from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
 
-__all__ = ["RehearsalResult", "rehearsal_config", "rehearse", "truth_calibration"]
+__all__ = ["Rehearsal", "RehearsalResult", "rehearsal_config", "rehearse", "truth_calibration"]
+
+# the UR series a robot rate stands for, when the arm sits behind the emulated UR controller
+UR_SERIES = {500.0: "e", 125.0: "cb3"}
 
 
 def truth_calibration(truth: dict) -> GravityCalibration:
@@ -89,6 +94,35 @@ def rehearsal_config(
     )
 
 
+@dataclass(frozen=True)
+class Rehearsal:
+    """What to rehearse: one session of `seconds`, logged to `log_path`, against a world set up so.
+
+    With `ur_host`, the robot is the world's arm behind the loopback UR controller
+    (`hoh_cosim.rehearsal.ur_controller`) at that address, driven through ur-rtde by the real
+    `RtdeRobot`, as on a rig; otherwise the runner reaches the arm through shared memory."""
+
+    seconds: float
+    log_path: Path
+    task: str = "circle"
+    robot_rate_hz: float = 500.0
+    faults: tuple[Fault, ...] = ()
+    rebias_samples: int = 500
+    task_start_s: float | None = None  # None: once the rebias is surely over
+    phantom_below_m: float | None = None
+    controller: ControllerParams | None = None
+    seed: int = 1
+    realtime_priority: int | None = None
+    ur_host: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "faults", tuple(self.faults))
+        if self.ur_host is not None and self.robot_rate_hz not in UR_SERIES:
+            raise ConfigError(
+                f"--rate: a UR controller runs at 125 or 500 Hz, got {self.robot_rate_hz:g}"
+            )
+
+
 @dataclass
 class RehearsalResult:
     session: SessionResult
@@ -98,66 +132,49 @@ class RehearsalResult:
 
 
 def rehearse(
-    seconds: float,
-    log_path: Path,
-    *,
-    task: str = "circle",
-    robot_rate_hz: float = 500.0,
-    faults: Sequence[Fault] = (),
-    rebias_samples: int = 500,
-    task_start_s: float | None = None,
-    phantom_below_m: float | None = None,
-    controller: ControllerParams | None = None,
-    seed: int = 1,
-    realtime_priority: int | None = None,
-    announce: Callable[[str], None] = lambda message: None,
-    ur_host: str | None = None,
+    setup: Rehearsal, *, announce: Callable[[str], None] = lambda message: None
 ) -> RehearsalResult:
-    """Start the world, run one session against it for `seconds`, stop everything.
-
-    With `ur_host`, the robot is the world's arm behind the loopback UR controller
-    (`hoh_cosim.rehearsal.ur_controller`) at that address, driven through ur-rtde by the real
-    `RtdeRobot`, as on a rig; otherwise the runner reaches the arm through shared memory."""
+    """Start the world, run one session against it for `setup.seconds`, stop everything."""
     # the hand takes the handle once the rebias (rebias_samples at 200 Hz) is surely over
-    start = task_start_s if task_start_s is not None else 1.0 + rebias_samples / 200.0 + 1.0
-    setup = WorldSetup(
-        robot_rate_hz=robot_rate_hz,
-        task=task,
+    start = (
+        setup.task_start_s
+        if setup.task_start_s is not None
+        else 1.0 + setup.rebias_samples / 200.0 + 1.0
+    )
+    world_setup = WorldSetup(
+        robot_rate_hz=setup.robot_rate_hz,
+        task=setup.task,
         task_start_s=start,
-        phantom_below_m=phantom_below_m,
-        seed=seed,
-        faults=tuple(faults),
+        phantom_below_m=setup.phantom_below_m,
+        seed=setup.seed,
+        faults=setup.faults,
     )
     announce("starting the rehearsal world")
-    with RehearsalWorld(setup) as world:
+    with RehearsalWorld(world_setup) as world:
         config = rehearsal_config(
             world,
-            log_path.parent,
-            rebias_samples=rebias_samples,
-            controller=controller,
-            realtime_priority=realtime_priority,
+            setup.log_path.parent,
+            rebias_samples=setup.rebias_samples,
+            controller=setup.controller,
+            realtime_priority=setup.realtime_priority,
         )
         calibration = truth_calibration(world.truth)
         ft = FT150Stream(config.ft150.host, config.ft150.port)
         probe = FSE103Port(config.probe.device, reconnect=False)  # type: ignore[union-attr]
         with contextlib.ExitStack() as stack:
             robot: Robot = world.robot()
-            if ur_host is not None:
-                series = {500.0: "e", 125.0: "cb3"}.get(robot_rate_hz)
-                if series is None:
-                    raise ConfigError(
-                        f"--rate: a UR controller runs at 125 or 500 Hz, got {robot_rate_hz:g}"
-                    )
+            if setup.ur_host is not None:
+                series = UR_SERIES[setup.robot_rate_hz]
                 try:
-                    stack.enter_context(UrController(world, ur_host, series=series))
+                    stack.enter_context(UrController(world, setup.ur_host, series=series))
                 except (RuntimeError, OSError) as exc:
-                    raise RunError(f"--ur-emulator {ur_host}: {exc}") from None
-                robot = RtdeRobot(ur_host, watchdog_hz=setup.watchdog_hz)
-                announce(f"UR controller emulated on {ur_host} (ur-rtde)")
-            log = SessionLog(log_path, _metadata(config, setup)).start()
+                    raise RunError(f"--ur-emulator {setup.ur_host}: {exc}") from None
+                robot = RtdeRobot(setup.ur_host, watchdog_hz=world_setup.watchdog_hz)
+                announce(f"UR controller emulated on {setup.ur_host} (ur-rtde)")
+            log = SessionLog(setup.log_path, _metadata(config, world_setup)).start()
             runner = Runner(config, robot, ft, probe, calibration, log, announce=announce)
-            session = runner.run(seconds)
-    return RehearsalResult(session, log_path, probe.parser.framing, probe.parser.byte_order)
+            session = runner.run(setup.seconds)
+    return RehearsalResult(session, setup.log_path, probe.parser.framing, probe.parser.byte_order)
 
 
 def _metadata(config: HardwareConfig, setup: WorldSetup) -> dict:

@@ -188,9 +188,9 @@ class _SharedWorld:
     """The world's shared memory, as the emulator's process sees it."""
 
     def __init__(self, state: Any, command: Any) -> None:
-        from hoh_cosim.rehearsal.world import _SeqLock
+        from hoh_cosim.rehearsal.world import SeqLock
 
-        self._state, self._command = _SeqLock(state), _SeqLock(command)
+        self._state, self._command = SeqLock(state), SeqLock(command)
 
 
 def _emulator_main(options: dict, state: Any, command: Any, control: Any, events: Any) -> None:

@@ -41,7 +41,7 @@ from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Params, FT150Sensor
 from plant_models.tissue import PhantomParams
 
-__all__ = ["FAULTS", "Fault", "RehearsalWorld", "SimulatedRobot", "WorldSetup"]
+__all__ = ["FAULTS", "Fault", "RehearsalWorld", "SeqLock", "SimulatedRobot", "WorldSetup"]
 
 FAULTS = (
     "probe_unplug",
@@ -60,7 +60,7 @@ _STATE = 3 + 9 + 6 + 6 + 6  # p, R, twist, [mode, safety, protective, emergency,
 _COMMAND = 6 + 4  # twist, [acceleration, kick time, stop, sequence]
 
 
-class _SeqLock:
+class SeqLock:
     """One writer, any readers, no waiting: the writer makes the sequence odd, writes, makes it
     even; a reader copies and keeps the copy only if the sequence was even and unchanged around it."""
 
@@ -140,7 +140,7 @@ class _World:
 
         self.setup = setup
         self.encode_sample, self.encode_frame = encode_sample, encode_frame
-        self.state, self.command = _SeqLock(state), _SeqLock(command)
+        self.state, self.command = SeqLock(state), SeqLock(command)
         arm = ArmParams(rate_hz=setup.robot_rate_hz)
         phantom = PhantomParams(shape="none")
         if setup.phantom_below_m is not None:
@@ -324,7 +324,7 @@ class RehearsalWorld:
         context = mp.get_context("spawn")  # a clean interpreter: no threads or sockets inherited
         self.state = context.RawArray("d", 1 + _STATE)
         self.command = context.RawArray("d", 1 + _COMMAND)
-        self._state, self._command = _SeqLock(self.state), _SeqLock(self.command)
+        self._state, self._command = SeqLock(self.state), SeqLock(self.command)
         self._ready = context.Queue()
         self._stop = context.Event()
         self._process = context.Process(
