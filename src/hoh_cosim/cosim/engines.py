@@ -16,9 +16,11 @@ latency), and none along the forward path from the hand to the command.
 
 Buffers are flat float arrays: every component's outputs are a view into one array, each input buffer
 is filled with one `np.take` from precomputed indices (scenario input values sit in a constants area
-at the end of that array). The FMU runtime then calls fmpy's raw `fmi2SetReal`, `fmi2DoStep` and
-`fmi2GetReal` with pointers into those buffers: one batched set and one batched get per FMU per step,
-all from the main thread, every status checked.
+at the end of that array). The FMU runtime then calls fmpy's public `FMU2Slave.fmi2SetReal`,
+`fmi2DoStep` and `fmi2GetReal` with pointers into those buffers: one batched set and one batched get
+per FMU per step, all from the main thread. fmpy checks every status and raises `FMICallException`
+above fmi2Warning, which the runtime turns into a one-line `RunError` naming the call and the FMU's
+last log message.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -45,6 +47,9 @@ from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.fmi import exit_fix
 from hoh_cosim.params import leaves
+
+if TYPE_CHECKING:
+    from fmpy.fmi1 import FMICallException
 
 __all__ = ["COUPLINGS", "ENGINES", "simulate"]
 
@@ -177,6 +182,7 @@ class FmuRuntime:
     """A component as an FMU loaded, initialised and stepped through fmpy."""
 
     def __init__(self, spec: ComponentSpec, fmu: Path, log: _FmuLog) -> None:
+        from fmpy.fmi1 import FMICallException
         from fmpy.fmi2 import FMU2Slave
 
         exit_fix.install()
@@ -204,10 +210,15 @@ class FmuRuntime:
         self.in_buf = np.zeros(sum(p.size for p in spec.inputs))
         self._in_vr = self._vr_array([n for p in spec.inputs for n in p.element_names])
         self._out_vr = self._vr_array([n for p in spec.outputs for n in p.element_names])
+        self._n_in, self._n_out = len(self._in_vr), len(self._out_vr)
         self._in_ptr = self.in_buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        self._set = self.fmu._functions["fmi2SetReal"]
-        self._get = self.fmu._functions["fmi2GetReal"]
-        self._do_step = self.fmu._functions["fmi2DoStep"]
+        # fmpy's public calls: each calls the C function and raises FMICallException on a status
+        # above fmi2Warning (see _failed); the class is kept here as fmpy is imported only when
+        # an FMU is run
+        self._set = self.fmu.fmi2SetReal
+        self._get = self.fmu.fmi2GetReal
+        self._do_step = self.fmu.fmi2DoStep
+        self._call_error = FMICallException
         self.fmu.instantiate(callbacks=log.callbacks, loggingOn=True)
         self._component = self.fmu.component
         self._alive = True
@@ -215,13 +226,17 @@ class FmuRuntime:
     def _vr_array(self, names: list[str]) -> Any:
         return (ctypes.c_uint * len(names))(*[self.vrs[n][0] for n in names])
 
-    def _check(self, status: int, call: str, t: float | None = None) -> None:
-        if status > 1:
-            at = f" at t = {t:.6g} s" if t is not None else ""
-            raise RunError(
-                f"{self.spec.name} ({self.fmu.modelIdentifier}): {call}{at} returned "
-                f"{_STATUS.get(status, status)}: {self.log.last(self.spec.name)}"
-            )
+    def _failed(self, exc: FMICallException, t: float | None = None) -> RunError:
+        """The error a failed FMI call becomes: which component, FMU and call, when, and why.
+
+        `exc` is what fmpy raises when a call returns more than fmi2Warning: its `function` and
+        `status`. The why is the FMU's last log message (ours log the exception they caught).
+        """
+        at = f" at t = {t:.6g} s" if t is not None else ""
+        return RunError(
+            f"{self.spec.name} ({self.fmu.modelIdentifier}): {exc.function}{at} returned "
+            f"{_STATUS.get(exc.status, exc.status)}: {self.log.last(self.spec.name)}"
+        )
 
     def _set_leaves(self, values: dict[str, Any]) -> None:
         by_type: dict[str, tuple[list[int], list[Any]]] = {}
@@ -270,22 +285,19 @@ class FmuRuntime:
         error = self.log.error(self.spec.name)
         if error is not None:  # our FMUs log a failure and carry on; stop here
             raise RunError(f"{self.spec.name} ({self.fmu.modelIdentifier}): {error}")
-        self._check(
-            self._get(self._component, self._out_vr, len(self._out_vr), self._out_ptr),
-            "fmi2GetReal",
-        )
+        try:
+            self._get(self._component, self._out_vr, self._n_out, self._out_ptr)
+        except self._call_error as exc:
+            raise self._failed(exc) from None
 
     def step(self, t: float, dt: float) -> None:
         c = self._component
-        status = self._set(c, self._in_vr, len(self._in_vr), self._in_ptr)
-        if status > 1:
-            self._check(status, "fmi2SetReal", t)
-        status = self._do_step(c, t, dt, 1)
-        if status > 1:
-            self._check(status, "fmi2DoStep", t)
-        status = self._get(c, self._out_vr, len(self._out_vr), self._out_ptr)
-        if status > 1:
-            self._check(status, "fmi2GetReal", t)
+        try:
+            self._set(c, self._in_vr, self._n_in, self._in_ptr)
+            self._do_step(c, t, dt, 1)
+            self._get(c, self._out_vr, self._n_out, self._out_ptr)
+        except self._call_error as exc:
+            raise self._failed(exc, t) from None
 
     def retune(self, params: Any, changes: dict[str, Any]) -> None:
         self._set_leaves(changes)
