@@ -323,15 +323,18 @@ def _stop_cause(
             f"probe contact force {force:.1f} N reached the "
             f"{policy.limits.probe_force_stop:g} N stop"
         )
+    gaps = Status(0)  # stale streams still inside their grace: the command is zero meanwhile
     for flag, name, age_port, error in (
         (Status.STALE_FT, policy.ft, "ft_age", ft_error),
         (Status.STALE_PROBE, policy.probe, "probe_age", probe_error),
     ):
         if status & flag and name is not None:
             age = float(estimate[age_port][0])
-            if age < policy.stale_stop_s:  # a gap: the controller commands zero meanwhile
-                return None
-            return f"{name}: no new sample for {1e3 * age:.0f} ms ({error or 'the stream stalled'})"
+            if age >= policy.stale_stop_s:
+                return f"{name}: no new sample for {1e3 * age:.0f} ms ({error or 'the stream stalled'})"
+            gaps |= flag
+    if not (status & STOP_FLAGS) & ~gaps:
+        return None
     return f"the controller stopped: {status.describe()}"
 
 
