@@ -47,18 +47,15 @@ import numpy as np
 from hoh_cosim.control.block import TWIST_UNITS, Port
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, as_vector, frozen
 from hoh_cosim.errors import ConfigError
+from plant_models.tasks import CONTACT_TASKS, PLANES, TASKS, TaskName
 
 __all__ = ["PLANES", "TASKS", "Operator", "OperatorParams"]
 
-TASKS = ("off", "hold", "circle", "line", "press", "scan", "push_release", "probe_push")
-PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
 
 @dataclass(frozen=True)
 class OperatorParams:
-    task: Literal[
-        "off", "hold", "circle", "line", "press", "scan", "push_release", "probe_push"
-    ] = "circle"
+    task: TaskName = "circle"
     start_s: float = 0.0  # [s] the hand takes the handle
     # circle: radius and period, in a plane of the base frame; the speed ramps up over ramp_s
     radius_m: float = 0.04
@@ -263,7 +260,7 @@ class Operator:
         offset, v_ref = self.reference(tau)
         p_ref = self._origin + offset
         F = p.stiffness * (p_ref - p_seen) + p.damping * (v_ref - v_seen)
-        if p.task in ("press", "scan"):
+        if p.task in CONTACT_TASKS:
             d = p.press_direction_B
             F = F - float(F @ d) * d  # the impedance acts across the pressing direction only
             F = F + self._press(float(-F_contact_seen @ d), dt) * d

@@ -1,7 +1,7 @@
 """The `hoh-cosim` command: the main parser, assembled from the command families in
 `hoh_cosim.commands`, and the exit status.
 
-    hoh-cosim SCENARIO.yaml [options]                 (see hoh_cosim.commands.cosim)
+    hoh-cosim [run] SCENARIO.yaml [options]           (see hoh_cosim.commands.cosim)
     hoh-cosim build-fmus | export | identify-gravity   (see hoh_cosim.commands.cosim)
     hoh-cosim hw run|calibrate|sensors|rehearse ...    (see hoh_cosim.commands.hardware)
     hoh-cosim replay LOG.mcap [--set ...] [--out DIR]
@@ -60,6 +60,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: list[str]) -> int:
     try:
+        if argv[:1] == ["run"]:  # `hoh-cosim run SCENARIO.yaml`: the bare form's synonym
+            argv = argv[1:]
         if argv and not argv[0].startswith("-") and argv[0] not in SUBCOMMANDS:
             return cosim_commands.run_scenario_command(argv, SUBCOMMANDS)
         args = _main_parser().parse_args(argv)

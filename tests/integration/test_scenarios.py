@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from hoh_cosim.calibration import read_calibration
@@ -130,7 +131,7 @@ def test_scenario_runs_and_writes_its_results(name, engine, tmp_path, capsys):
             assert all(np.isfinite(metrics[key]))
     assert metrics["realtime_factor"] > 0
     assert metrics["wall_s"] > 0
-    header = (out / "signals.csv").read_text().split("\n", 1)[0].split(",")
+    header = pq.read_schema(out / "signals.parquet").names
     assert header[0] == "time"
     for signal in scenario.record:
         assert any(column.startswith(signal) for column in header), signal

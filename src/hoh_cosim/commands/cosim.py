@@ -11,49 +11,56 @@ hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,G
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
 from hoh_cosim.commands import ArgumentParser
-from hoh_cosim.cosim.engines import COUPLINGS, ENGINES
-from hoh_cosim.cosim.external import ENGINE_COUPLING, EXTERNAL_ENGINES
+from hoh_cosim.cosim import COUPLINGS, ENGINE_COUPLING, ENGINES, EXTERNAL_ENGINES
 from hoh_cosim.errors import ConfigError
+from hoh_cosim.results import FORMATS
 
 __all__ = ["COMMANDS", "add_commands", "run_command", "run_scenario_command"]
 
 COMMANDS = ("build-fmus", "export", "identify-gravity")
 
 
-def _gravity(text: str) -> np.ndarray:
+def _gravity(text: str) -> list[float]:
     parts = text.split(",")
     try:
         values = [float(p) for p in parts]
     except ValueError:
         values = []
-    if len(values) != 3 or not np.all(np.isfinite(values)):
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(
             f"expected three comma-separated numbers like 0,0,-9.81, got {text!r}"
         )
-    return np.array(values)
+    return values
 
 
 def add_scenario_options(parser: argparse.ArgumentParser) -> None:
     """--duration, --seed and --set: what changes a scenario as it is loaded."""
     parser.add_argument(
-        "--duration", type=float, metavar="S", help="simulated seconds instead of the scenario's"
+        "--duration",
+        type=float,
+        metavar="S",
+        help="simulated seconds (default: the scenario's duration_s)",
     )
-    parser.add_argument("--seed", type=int, metavar="N", help="seed instead of the scenario's")
+    parser.add_argument(
+        "--seed", type=int, metavar="N", help="the random seed (default: the scenario's seed)"
+    )
     parser.add_argument(
         "--set",
         dest="overrides",
         action="append",
         default=[],
         metavar="C.P=V",
-        help="set a parameter, e.g. controller.contact_compensation=false (repeatable)",
+        help=(
+            "set a component's parameter, e.g. controller.contact_compensation=false or "
+            "estimator.filter=butterworth (repeatable; default: the scenario's values)"
+        ),
     )
 
 
@@ -73,7 +80,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
             "them afresh into DIR."
         ),
     )
-    build.add_argument("--out", metavar="DIR", help="where to put the .fmu files")
+    build.add_argument(
+        "--out",
+        metavar="DIR",
+        help="where to put the .fmu files (default: the cache a scenario run uses)",
+    )
 
     export = sub.add_parser(
         "export",
@@ -118,14 +129,18 @@ def _scenario_parser(others: Sequence[str]) -> argparse.ArgumentParser:
         prog="hoh-cosim",
         usage="hoh-cosim SCENARIO.yaml [options]",
         description=(
-            "Run a co-simulation scenario and write signals.csv, summary.json and plots into "
-            "the output directory."
+            "Run a co-simulation scenario and write signals.parquet (or signals.csv), "
+            "summary.json and plots into the output directory. 'hoh-cosim run SCENARIO.yaml' "
+            "is the same."
         ),
         epilog="Other commands: " + ", ".join(others) + " (see hoh-cosim COMMAND --help).",
     )
     parser.add_argument("scenario", metavar="SCENARIO.yaml")
     parser.add_argument(
-        "--out", metavar="DIR", help="results directory (default: runs/<scenario name>)"
+        "--out",
+        metavar="DIR",
+        help="results directory, replaced whole if it holds an earlier run "
+        "(default: runs/<scenario name>)",
     )
     parser.add_argument(
         "--engine",
@@ -145,8 +160,19 @@ def _scenario_parser(others: Sequence[str]) -> argparse.ArgumentParser:
             "(jacobi) or ecos (jacobi-eager) do"
         ),
     )
+    parser.add_argument(
+        "--format",
+        choices=FORMATS,
+        default="parquet",
+        help=(
+            "the signals' file: signals.parquet, compact and typed (default; pandas, polars, "
+            "MATLAB and pyarrow read it), or signals.csv, text"
+        ),
+    )
     add_scenario_options(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bar, no metric table")
+    parser.add_argument(
+        "--quiet", action="store_true", help="no progress bar and no metric table (default: both)"
+    )
     return parser
 
 
@@ -177,14 +203,16 @@ def run_scenario_command(argv: Sequence[str], others: Sequence[str]) -> int:
         seed=args.seed,
         overrides=args.overrides,
         progress=not args.quiet,
+        fmt=args.format,
     )
     for note in result.report.notes:
         print(f"hoh-cosim: note: {note}", file=sys.stderr)
     if not args.quiet:
         s = result.summary
+        m = s["metrics"]
         print(
-            f"{s['scenario']}: {s['duration_s']:g} s simulated in {s['wall_s']:.2f} s "
-            f"({_metric_text(s['realtime_factor'])}x real time, engine {s['engine']}, seed {s['seed']})"
+            f"{s['scenario']}: {s['duration_s']:g} s simulated in {m['wall_s']:.2f} s "
+            f"({_metric_text(m['realtime_factor'])}x real time, engine {s['engine']}, seed {s['seed']})"
         )
         width = max(len(k) for k in s["metrics"])
         for key, value in s["metrics"].items():
@@ -223,18 +251,20 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fmt(values: np.ndarray, digits: int = 5, signed: bool = True) -> str:
+def _fmt(values: Sequence[float], digits: int = 5, signed: bool = True) -> str:
     sign = "+" if signed else ""
     return "[" + ", ".join(f"{v:{sign}.{digits}f}" for v in values) + "]"
 
 
 def _identify_gravity(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from hoh_cosim.calibration import read_poses_csv, write_calibration
     from hoh_cosim.control.gravity import identify_gravity
     from hoh_cosim.control.vectors import GRAVITY_B
     from hoh_cosim.errors import IdentificationError, InputFileError
 
-    g_B = GRAVITY_B if args.gravity is None else args.gravity
+    g_B = GRAVITY_B if args.gravity is None else np.array(args.gravity)
     R_BS, wrench = read_poses_csv(args.poses)
     try:
         cal = identify_gravity(R_BS, wrench, g_B)

@@ -19,7 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from hoh_cosim.errors import ConfigError, RunError
-from plant_models.operator import TASKS
+from hoh_cosim.rehearsal.faults import FAULTS, Fault
+from hoh_cosim.results import check_out_dir, check_writable, replace_dir
+from plant_models.tasks import CONTACT_TASKS, TASKS
 
 __all__ = ["add_commands", "run_command"]
 
@@ -35,9 +37,7 @@ def _endpoint(text: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def _fault(text: str) -> Any:
-    from hoh_cosim.rehearsal.world import FAULTS, Fault
-
+def _fault(text: str) -> Fault:
     kind, _, at = text.partition("@")
     try:
         at_s = float(at)
@@ -50,8 +50,6 @@ def _fault(text: str) -> Any:
 
 def add_commands(sub: Any) -> None:
     """The `hw` and `replay` subcommands, on the main parser's subparsers."""
-    from hoh_cosim.rehearsal.world import FAULTS
-
     hw = sub.add_parser(
         "hw",
         help="run, calibrate, diagnose or rehearse on the robot",
@@ -220,6 +218,7 @@ def _hw_run(args: argparse.Namespace) -> int:
         raise ConfigError(f"{config.path}: calibration: missing (run 'hoh-cosim hw calibrate')")
     calibration = read_calibration(config.calibration)
     log_path = Path(args.log) if args.log else config.log_dir / f"session-{_stamp()}.mcap"
+    check_writable(log_path.parent, "--log" if args.log else f"{config.path}: log_dir")
     if config.ft150.zero_on_start:
         zero_sensor(config.ft150.host)
     robot = RtdeRobot(
@@ -290,7 +289,7 @@ def _hw_calibrate(args: argparse.Namespace) -> int:
 
 
 def _hw_sensors(args: argparse.Namespace) -> int:
-    from hoh_cosim.hardware.diagnostics import describe_streams, read_streams
+    from hoh_cosim.hardware.diagnostics import describe_streams, read_streams, silent_streams
     from hoh_cosim.hardware.fse103 import FSE103Port
     from hoh_cosim.hardware.ft150 import FT150Stream
 
@@ -305,12 +304,15 @@ def _hw_sensors(args: argparse.Namespace) -> int:
         else None
     )
     figures = read_streams(ft, probe, args.seconds)
+    names = {"ft": ft.describe() if ft else "", "probe": probe.describe() if probe else ""}
+    silent = silent_streams(figures, names)
+    for line in silent:  # the cause first, then what the streams that answered look like
+        print(f"hoh-cosim: {line}", file=sys.stderr, flush=True)
     if args.json:
         print(json.dumps(figures))
     else:
-        names = {"ft": ft.describe() if ft else "", "probe": probe.describe() if probe else ""}
         print(describe_streams(figures, names))
-    return 0
+    return 1 if silent else 0
 
 
 def _hw_rehearse(args: argparse.Namespace) -> int:
@@ -319,7 +321,8 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     if not args.seconds > 0:
         raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")
     log_path = Path(args.log) if args.log else Path("sessions") / f"rehearsal-{_stamp()}.mcap"
-    phantom = 0.03 if args.task in ("press", "scan") else None
+    check_writable(log_path.parent, "--log")
+    phantom = 0.03 if args.task in CONTACT_TASKS else None
     setup = Rehearsal(
         seconds=args.seconds,
         log_path=log_path,
@@ -339,12 +342,17 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from hoh_cosim.hardware.replay import plot_replay, replay
 
-    result = replay(args.log, args.overrides)
     out = Path(args.out) if args.out else Path("runs") / f"replay-{Path(args.log).stem}"
-    out.mkdir(parents=True, exist_ok=True)
+    check_out_dir(out, marker="replay.json", what="replay")
+    result = replay(args.log, args.overrides)
     summary = result.summary()
-    (out / "replay.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    (out / "replay.png").write_bytes(plot_replay(result))
+    png = plot_replay(result)
+
+    def fill(staging: Path) -> None:
+        (staging / "replay.png").write_bytes(png)
+        (staging / "replay.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+
+    replace_dir(out, fill)
     if not result.session.complete:
         print(
             f"note: {args.log} ends early (the session was cut off); replayed what is there",

@@ -55,8 +55,8 @@ def add_commands(sub) -> None:
         help="run many variants of a scenario on Dask, one table row per run",
         description=(
             "Run a grid or a seeded random sample of scenario variants (any --set parameter, any "
-            "seed) on a local Dask cluster or an existing one; write runs.csv (and runs.parquet "
-            "with pyarrow) with the varied parameters, every metric, status and wall time."
+            "seed) on a local Dask cluster or an existing one; write runs.csv and runs.parquet "
+            "with the varied parameters, every metric, status and wall time."
         ),
     )
     sweep.add_argument("sweep", metavar="SWEEP.yaml")
@@ -128,7 +128,8 @@ def _check_workers(args: argparse.Namespace) -> None:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from hoh_cosim.cosim.run import check_out_dir, jsonable, replace_dir
+    from hoh_cosim.cosim.run import jsonable
+    from hoh_cosim.results import check_out_dir, replace_dir
     from hoh_cosim.study.sweep import load_sweep, run_variants, table_rows, write_table
 
     _check_workers(args)

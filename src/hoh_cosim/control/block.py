@@ -13,6 +13,7 @@ an array after returning it.
 
 from __future__ import annotations
 
+import enum
 import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -46,12 +47,15 @@ class Port:
 
     `unit` is one SI unit string for every element, or one per element (a wrench is N, N, N, N.m,
     N.m, N.m). Units are plain ASCII as FMI tools expect: 'N.m', 'm/s', 'rad/s', '1' for none.
+    `flags`: for a scalar bit field, the `enum.IntFlag` whose members name its bits (results show
+    them by name).
     """
 
     name: str
     size: int
     unit: str | tuple[str, ...]
     description: str
+    flags: type[enum.IntFlag] | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.unit, tuple) and len(self.unit) != self.size:

@@ -125,7 +125,13 @@ class HandGuidingController:
             TWIST_UNITS,
             "the admittance law's twist before the fixture and the limits",
         ),
-        Port("status", 1, "1", "Status flags of this tick (hoh_cosim.control.supervisor.Status)"),
+        Port(
+            "status",
+            1,
+            "1",
+            "Status flags of this tick (hoh_cosim.control.supervisor.Status)",
+            flags=Status,
+        ),
     )
 
     def __init__(self, params: ControllerParams | None = None) -> None:

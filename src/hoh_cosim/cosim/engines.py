@@ -30,8 +30,10 @@ import contextlib
 import ctypes
 import math
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -41,7 +43,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from hoh_cosim.control.block import make_block
-from hoh_cosim.cosim.external import EXTERNAL_ENGINES, simulate_external
+from hoh_cosim.cosim import COUPLINGS, ENGINES, EXTERNAL_ENGINES
+from hoh_cosim.cosim.external import simulate_external
 from hoh_cosim.cosim.recording import Recording, recording_layout
 from hoh_cosim.cosim.scenario import ComponentSpec, Scenario
 from hoh_cosim.errors import ConfigError, RunError
@@ -52,12 +55,6 @@ if TYPE_CHECKING:
     from fmpy.fmi1 import FMICallException
 
 __all__ = ["COUPLINGS", "ENGINES", "simulate"]
-
-ENGINES = ("fmu", "inprocess", *EXTERNAL_ENGINES)
-# how an output reaches the inputs it is connected to (see `hoh_cosim.cosim.external`):
-# gauss-seidel: at once, in the file's order; jacobi: when the source's step ends (libcosim);
-# jacobi-eager: one tick after the source's step began, even if that step lasts several (ecos)
-COUPLINGS = ("gauss-seidel", "jacobi", "jacobi-eager")
 
 
 class Runtime(Protocol):
@@ -342,6 +339,33 @@ class _Progress:
             sys.stderr.flush()
 
 
+class _InterruptLatch:
+    """Ctrl-C during stepping, taken between two ticks instead of inside a component.
+
+    A KeyboardInterrupt raised inside an FMU's Python code fails its fmi2DoStep (the FMU reports it
+    as a Fatal status), and inside a block it could leave the block half-stepped: so while the
+    master steps, SIGINT only sets `requested`, and the loop raises KeyboardInterrupt at its next
+    check. Only in the main thread and when Python's own handler is in place (a sweep's workers and
+    a caller with its own handler are left alone)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Any = None
+        if threading.current_thread() is not threading.main_thread():
+            return
+        if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+            return
+        self._previous = signal.signal(signal.SIGINT, self._handle)
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        self.requested = True
+
+    def restore(self) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
+
+
 def simulate(
     scenario: Scenario,
     engine: str = "fmu",
@@ -457,9 +481,12 @@ def _run(
     ]
     bar = _Progress(scenario.name, scenario.duration_s, progress)
     start = time.perf_counter()
+    interrupt = _InterruptLatch()
     try:
         for k in range(n):
             t = k * dt
+            if k % 100 == 0 and interrupt.requested:
+                raise KeyboardInterrupt
             while events and events[0].time_s <= t + 0.5 * dt:
                 event = events.popleft()
                 by_name[event.component].retune(event.params, event.changes)
@@ -485,7 +512,10 @@ def _run(
             f"{scenario.path}: the run failed at t = {t:.6g} s: {type(exc).__name__}: {exc}"
         ) from exc
     finally:
+        interrupt.restore()
         bar.close()
+    if interrupt.requested:  # pressed during the last ticks
+        raise KeyboardInterrupt
     wall = time.perf_counter() - start
     timeline = np.arange(n + 1) * dt
     if not math.isfinite(wall):

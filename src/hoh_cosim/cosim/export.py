@@ -306,7 +306,7 @@ def export_scenario(
     command: str | None = None,
 ) -> ExportResult:
     """Write the scenario's FMUs, SSP archive, OSP system structure and README into `out`."""
-    from hoh_cosim.cosim.run import check_out_dir, replace_dir
+    from hoh_cosim.results import check_out_dir, replace_dir
 
     scenario = load_scenario(path, overrides, duration_s, seed)
     out = Path(out)

@@ -42,6 +42,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
+from hoh_cosim.cosim import ENGINE_COUPLING, EXTERNAL_ENGINES
 from hoh_cosim.cosim.recording import Recording, recording_layout
 from hoh_cosim.cosim.scenario import Scenario
 from hoh_cosim.errors import ConfigError, RunError
@@ -57,9 +58,6 @@ __all__ = [
     "system_of",
 ]
 
-EXTERNAL_ENGINES = ("libcosim", "ecos")
-# our master's coupling that each engine has (see `hoh_cosim.cosim.engines.COUPLINGS`)
-ENGINE_COUPLING = {"libcosim": "jacobi", "ecos": "jacobi-eager"}
 PARAMETER_SET = "scenario"  # the name of the one parameter set, in ecos and in an exported SSP
 
 _INSTALL = 'install them with: pip install "hoh-cosim[engines]"'

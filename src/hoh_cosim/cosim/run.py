@@ -1,7 +1,10 @@
 """One scenario run from the file to the results directory (DESIGN.md §6).
 
-    DIR/signals.csv     time and every recorded signal, one column per element (component.port[i])
-    DIR/summary.json    scenario, engine, seed, duration, wall time, real-time factor, metrics, notes
+    DIR/signals.parquet time and every recorded signal, one column per element (component.port[i]),
+                        and a bit field's flags by name beside it (controller.status_text);
+                        DIR/signals.csv with --format csv, the same columns
+    DIR/summary.json    scenario, engine, seed, duration, metrics (with wall time and real-time
+                        factor), notes
     DIR/*.png           the scenario's plots
     DIR/...             whatever else the metric set produces (poses.csv, calibration.json)
 
@@ -13,12 +16,11 @@ in the same place is replaced whole, never mixed with the new one. A directory t
 
 from __future__ import annotations
 
+import enum
+import io
 import json
 import math
-import os
-import shutil
-import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,15 +33,16 @@ from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import Report, compute_report
 from hoh_cosim.cosim.scenario import Scenario, load_scenario
 from hoh_cosim.errors import ConfigError
+from hoh_cosim.results import FORMATS, check_out_dir, replace_dir
 
 __all__ = [
     "RunResult",
-    "check_out_dir",
     "jsonable",
-    "replace_dir",
     "run_scenario",
+    "signal_columns",
     "summary_of",
     "write_results",
+    "write_signals",
 ]
 
 
@@ -50,18 +53,6 @@ class RunResult:
     report: Report
     out: Path
     summary: dict[str, Any]
-
-
-def check_out_dir(out: Path, marker: str = "summary.json", what: str = "run") -> None:
-    """Refuse, before anything runs, a destination that a result must not replace: one that is not
-    a directory, or a non-empty directory without `marker` (so not an earlier result)."""
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
-        raise ConfigError(
-            f"--out {out}: exists, is not empty and holds no {marker}, so it is not a "
-            f"hoh-cosim {what} directory; choose another"
-        )
 
 
 def jsonable(value: Any) -> Any:
@@ -91,51 +82,77 @@ def summary_of(
             "duration_s": scenario.duration_s,
             "dt_s": scenario.dt_s,
             "overrides": list(overrides),
-            "wall_s": rec.wall_s,
-            "realtime_factor": report.metrics.get("realtime_factor"),
-            "metrics": report.metrics,
+            "metrics": report.metrics,  # with the run's wall_s and realtime_factor
             "notes": report.notes,
             "hoh_cosim_version": __version__,
         }
     )
 
 
-def _signals_csv(path: Path, scenario: Scenario, rec: Recording) -> None:
+def flag_names(flags: type[enum.IntFlag], value: float) -> str:
+    """A bit field's set flags by name, `A|B` ("ok" when none is set)."""
+    bits = int(value)
+    return "|".join(f.name for f in flags if f.name and f.value & bits) or "ok"
+
+
+def signal_columns(scenario: Scenario, rec: Recording) -> dict[str, np.ndarray]:
+    """The recorded signals as named columns: `time`, then one per element (`component.port[i]`),
+    and beside a bit field (a port with `flags`) its flags by name (`component.port_text`)."""
     rows = slice(None, None, scenario.record_every)
-    header = ["time"]
-    blocks = [rec.time[rows, None]]
+    columns: dict[str, np.ndarray] = {"time": rec.time[rows]}
     for signal in scenario.record:
-        header += rec.element_names[signal]
-        blocks.append(rec[signal][rows])
-    data = np.hstack(blocks)
+        values = rec[signal][rows]
+        for i, name in enumerate(rec.element_names[signal]):
+            columns[name] = values[:, i]
+        component, _, port_name = signal.partition(".")
+        port = next(p for p in scenario.components[component].outputs if p.name == port_name)
+        if port.flags is not None:
+            codes = values[:, 0]
+            text = {v: flag_names(port.flags, v) for v in np.unique(codes)}
+            columns[f"{signal}_text"] = np.array([text[v] for v in codes.tolist()], dtype=object)
+    return columns
+
+
+def _write_csv(path: Path, columns: dict[str, np.ndarray]) -> None:
+    numeric = [name for name, v in columns.items() if v.dtype != object]
+    text = [name for name, v in columns.items() if v.dtype == object]
+    buffer = io.StringIO()
+    np.savetxt(buffer, np.column_stack([columns[n] for n in numeric]), fmt="%.10g", delimiter=",")
+    lines = buffer.getvalue().splitlines()
+    if text:
+        extra = zip(*(columns[n] for n in text), strict=True)
+        lines = [",".join((line, *words)) for line, words in zip(lines, extra, strict=True)]
     with path.open("w", encoding="utf-8", newline="\n") as f:
-        f.write(",".join(header) + "\n")
-        np.savetxt(f, data, fmt="%.10g", delimiter=",")
+        f.write(",".join(numeric + text) + "\n")
+        f.write("\n".join(lines) + "\n")
 
 
-def replace_dir(out: Path, fill: Callable[[Path], None]) -> None:
-    """Call `fill(staging)` on an empty directory beside `out`, then move it into place in one
-    rename: a failure leaves no half-written result, and an earlier one at `out` is replaced whole
-    (or put back if the move fails)."""
-    out = out.absolute()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    old: Path | None = None
-    try:
-        fill(staging)
-        os.chmod(staging, 0o755)
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
-            out.rename(old / out.name)
-        staging.rename(out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        if old is not None and not out.exists():
-            (old / out.name).rename(out)  # put the earlier result back
-        raise
-    finally:
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+def _write_parquet(path: Path, columns: dict[str, np.ndarray]) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.table(
+        {
+            name: pa.array(v, type=pa.string()).dictionary_encode() if v.dtype == object else v
+            for name, v in columns.items()
+        }
+    )
+    # float columns split into byte streams compress about a third better under zstd (circles, 30 s:
+    # 9.6 MB as CSV, 3.3 MB plain, 2.9 MB split; measured with pyarrow 26)
+    floats = [name for name, v in columns.items() if v.dtype != object]
+    pq.write_table(
+        table, path, compression="zstd", use_dictionary=False, use_byte_stream_split=floats
+    )
+
+
+def write_signals(directory: Path, scenario: Scenario, rec: Recording, fmt: str) -> Path:
+    """`signals.parquet` or `signals.csv` in `directory`; the path written."""
+    if fmt not in FORMATS:
+        raise ConfigError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
+    path = directory / f"signals.{fmt}"
+    columns = signal_columns(scenario, rec)
+    (_write_parquet if fmt == "parquet" else _write_csv)(path, columns)
+    return path
 
 
 def write_results(
@@ -145,12 +162,13 @@ def write_results(
     report: Report,
     summary: dict,
     plots: dict[str, bytes],
+    fmt: str = "parquet",
 ) -> None:
     """Write a run's files into `out` through `replace_dir`; summary.json last, since its presence
     says the directory is complete."""
 
     def fill(staging: Path) -> None:
-        _signals_csv(staging / "signals.csv", scenario, rec)
+        write_signals(staging, scenario, rec, fmt)
         for name, text in report.files.items():
             (staging / name).write_text(text, encoding="utf-8")
         for name, png in plots.items():
@@ -173,8 +191,12 @@ def run_scenario(
     overrides: Sequence[str] = (),
     progress: bool = True,
     plots: bool = True,
+    fmt: str = "parquet",
 ) -> RunResult:
-    """Load, run, measure and write one scenario; `out` defaults to runs/<scenario name>."""
+    """Load, run, measure and write one scenario; `out` defaults to runs/<scenario name>, the
+    signals as `fmt` ("parquet" or "csv")."""
+    if fmt not in FORMATS:
+        raise ConfigError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
     scenario = load_scenario(path, overrides, duration_s, seed)
     out_dir = Path(out) if out is not None else Path("runs") / scenario.name
     check_out_dir(out_dir)
@@ -186,5 +208,5 @@ def run_scenario(
         from hoh_cosim.cosim.plots import render_plots
 
         images = render_plots(scenario, rec, report)
-    write_results(out_dir, scenario, rec, report, summary, images)
+    write_results(out_dir, scenario, rec, report, summary, images, fmt)
     return RunResult(scenario, rec, report, out_dir, summary)

@@ -19,7 +19,7 @@ from typing import Any
 
 from hoh_cosim.hardware.streams import Mailbox
 
-__all__ = ["describe_streams", "read_streams"]
+__all__ = ["describe_streams", "read_streams", "silent_streams"]
 
 
 def _figures(mailbox: Mailbox) -> dict[str, Any]:
@@ -39,13 +39,25 @@ def _figures(mailbox: Mailbox) -> dict[str, Any]:
     return out
 
 
-def read_streams(ft: Any | None, probe: Any | None, seconds: float) -> dict[str, Any]:
-    """Run the given streams for `seconds` and return their figures (keys "ft", "probe")."""
+def read_streams(
+    ft: Any | None, probe: Any | None, seconds: float, poll_s: float = 0.05
+) -> dict[str, Any]:
+    """Run the given streams for `seconds` and return their figures (keys "ft", "probe").
+
+    Ends early when no stream has given a sample and every one has failed (a refused connection,
+    a missing device): waiting longer would only repeat the failure."""
     sources = {name: s for name, s in (("ft", ft), ("probe", probe)) if s is not None}
     for source in sources.values():
         source.start()
     try:
-        time.sleep(seconds)
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            time.sleep(min(poll_s, max(0.0, deadline - time.monotonic())))
+            if all(
+                s.mailbox.stats.frames == 0 and s.mailbox.last_error is not None
+                for s in sources.values()
+            ):
+                break
     finally:
         for source in sources.values():
             source.stop()
@@ -54,6 +66,17 @@ def read_streams(ft: Any | None, probe: Any | None, seconds: float) -> dict[str,
         out["probe"]["framing"] = probe.parser.framing
         out["probe"]["byte_order"] = probe.parser.byte_order
     return out
+
+
+def silent_streams(figures: dict[str, Any], names: dict[str, str]) -> list[str]:
+    """One line per stream that gave no sample: its name and why, for a pre-session check."""
+    lines = []
+    for key in ("ft", "probe"):
+        f = figures.get(key)
+        if f is not None and f["frames"] == 0:
+            why = f.get("error") or "nothing arrived"
+            lines.append(f"{names[key]}: no data ({why})")
+    return lines
 
 
 def describe_streams(figures: dict[str, Any], names: dict[str, str]) -> str:
@@ -79,9 +102,10 @@ def describe_streams(figures: dict[str, Any], names: dict[str, str]) -> str:
                 f"  framing {f['framing'] or 'not detected'}, byte order "
                 f"{f['byte_order'] or 'not detected'}"
             )
-        lines.append(f"  axes  {axes}")
-        lines.append(f"  mean  {row(f['mean'], 4)}")
-        lines.append(f"  std   {row(f['std'], 4)}")
+        if f["frames"]:
+            lines.append(f"  axes  {axes}")
+            lines.append(f"  mean  {row(f['mean'], 4)}")
+            lines.append(f"  std   {row(f['std'], 4)}")
         if "error" in f:
             lines.append(f"  last error: {f['error']}")
     return "\n".join(lines)

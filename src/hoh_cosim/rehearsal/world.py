@@ -35,6 +35,7 @@ import numpy as np
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pacer, RobotState
+from hoh_cosim.rehearsal.faults import FAULTS, Fault
 from plant_models.arm import ArmParams
 from plant_models.operator import TASKS, Operator, OperatorParams
 from plant_models.plant import Plant, PlantParams
@@ -43,15 +44,6 @@ from plant_models.tissue import PhantomParams
 
 __all__ = ["FAULTS", "Fault", "RehearsalWorld", "SeqLock", "SimulatedRobot", "WorldSetup"]
 
-FAULTS = (
-    "probe_unplug",
-    "ft_stall",
-    "ft_garbage",
-    "probe_garbage",
-    "ft_nan",
-    "force_spike",
-    "protective_stop",
-)
 WORLD_DT = 1e-3
 
 # shared memory: [sequence, values...], written under a sequence lock (no lock a reader could
@@ -85,16 +77,6 @@ class SeqLock:
                 self.last = copy
                 return copy
         return self.last.copy()
-
-
-@dataclass(frozen=True)
-class Fault:
-    at_s: float
-    kind: str
-
-    def __post_init__(self) -> None:
-        if self.kind not in FAULTS:
-            raise ConfigError(f"fault: expected one of {', '.join(FAULTS)}, got {self.kind!r}")
 
 
 @dataclass(frozen=True)

@@ -38,8 +38,9 @@ import numpy as np
 from hoh_cosim.control.probe_correction import HIDDEN, network_forward, pack_network
 from hoh_cosim.cosim.plots import png, probe_forces_figure, pyplot
 from hoh_cosim.cosim.report import ProbeSamples, axis_correlation, axis_rms
-from hoh_cosim.cosim.run import check_out_dir, jsonable, replace_dir
+from hoh_cosim.cosim.run import jsonable
 from hoh_cosim.errors import ConfigError, RunError
+from hoh_cosim.results import check_out_dir, replace_dir
 from hoh_cosim.study.sweep import Outcome, Variant, run_variants, set_option
 from hoh_cosim.study.verification import Table
 

@@ -30,7 +30,7 @@ seeded random streams), so where it ran does not change its numbers: the table e
 one except for wall times. A run that fails is a row with status `failed` and its error; a worker
 that dies is retried by Dask, then recorded the same way. The table: `run`, `seed`, one column per
 varied parameter, `status`, `error`, `wall_s`, then every metric (vectors as `name[1]`, `name[2]`,
-...), as CSV and, with pyarrow installed, Parquet.
+...), as CSV and Parquet.
 """
 
 from __future__ import annotations
@@ -493,21 +493,11 @@ def _parquet(path: Path, columns: Sequence[str], rows: Sequence[Mapping[str, Any
     pq.write_table(pa.table(arrays), path)
 
 
-def parquet_available() -> bool:
-    try:
-        import pyarrow.parquet  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def write_table(
     directory: Path, columns: Sequence[str], rows: Sequence[Mapping[str, Any]]
 ) -> list[Path]:
-    """runs.csv, and runs.parquet when pyarrow is installed, into `directory`."""
-    written = [directory / "runs.csv"]
+    """runs.csv and runs.parquet into `directory`."""
+    written = [directory / "runs.csv", directory / "runs.parquet"]
     written[0].write_text(csv_text(columns, rows), encoding="utf-8")
-    if parquet_available():
-        written.append(directory / "runs.parquet")
-        _parquet(written[-1], columns, rows)
+    _parquet(written[1], columns, rows)
     return written

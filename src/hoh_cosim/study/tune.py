@@ -349,8 +349,9 @@ def run_tune(
     """The whole search; writes candidates.csv and best.json into `out` (replaced whole)."""
     import json
 
-    from hoh_cosim.cosim.run import check_out_dir, jsonable, replace_dir
+    from hoh_cosim.cosim.run import jsonable
     from hoh_cosim.errors import ConfigError
+    from hoh_cosim.results import check_out_dir, replace_dir
     from hoh_cosim.study.sweep import csv_text, run_variants
 
     out, scenarios = Path(out), Path(scenarios)

@@ -265,8 +265,9 @@ def build_report(
     progress: bool = True,
 ) -> ReportResult:
     """Run everything the report needs, draw it, and write it to `out` (replaced whole)."""
-    from hoh_cosim.cosim.run import check_out_dir, jsonable, replace_dir
+    from hoh_cosim.cosim.run import jsonable
     from hoh_cosim.cosim.scenario import load_scenario
+    from hoh_cosim.results import check_out_dir, replace_dir
 
     out = Path(out)
     scenarios = Path(scenarios)

@@ -1,0 +1,67 @@
+"""Results directories: refused before any work when they cannot be written or are not ours, and
+filled beside their destination, then moved into place in one rename, so that a failure or Ctrl-C
+leaves nothing half-written that looks like a result."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["FORMATS", "check_out_dir", "check_writable", "replace_dir"]
+
+FORMATS = ("parquet", "csv")  # of a run's signals.*: compact and typed, or text for anything
+
+
+def check_writable(directory: Path, option: str) -> None:
+    """Refuse, before any work, a directory where nothing can be written: make it (and its
+    parents) if need be, then create and remove a file in it."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".hoh-cosim-write-check-", dir=directory)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ConfigError(f"{option}: cannot write in {directory}: {exc.strerror or exc}") from None
+
+
+def check_out_dir(out: Path, marker: str = "summary.json", what: str = "run") -> None:
+    """Refuse, before anything runs, a destination that a result must not replace: one that is not
+    a directory, or a non-empty directory without `marker` (so not an earlier result)."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {out}: exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
+        raise ConfigError(
+            f"--out {out}: exists, is not empty and holds no {marker}, so it is not a "
+            f"hoh-cosim {what} directory; choose another"
+        )
+    check_writable(out.absolute().parent, f"--out {out}")
+
+
+def replace_dir(out: Path, fill: Callable[[Path], None]) -> None:
+    """Call `fill(staging)` on an empty directory beside `out`, then move it into place in one
+    rename: a failure leaves no half-written result, and an earlier one at `out` is replaced whole
+    (or put back if the move fails)."""
+    out = out.absolute()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    old: Path | None = None
+    try:
+        fill(staging)
+        os.chmod(staging, 0o755)
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
+            out.rename(old / out.name)
+        staging.rename(out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        if old is not None and not out.exists():
+            (old / out.name).rename(out)  # put the earlier result back
+        raise
+    finally:
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
