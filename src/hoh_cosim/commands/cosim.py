@@ -95,7 +95,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
             "README with every variable and what a host needs."
         ),
     )
-    export.add_argument("scenario", metavar="SCENARIO.yaml")
+    export.add_argument("scenario", metavar="SCENARIO.yaml", help="the scenario to export")
     export.add_argument("--out", required=True, metavar="DIR", help="the export directory")
     add_scenario_options(export)
 
@@ -108,7 +108,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
             "vector of R_BS in rad, raw averaged reading in N and N·m)."
         ),
     )
-    ident.add_argument("poses", metavar="POSES.csv")
+    ident.add_argument(
+        "poses", metavar="POSES.csv", help="one static pose a row: rx,ry,rz,fx,fy,fz,tx,ty,tz"
+    )
     ident.add_argument(
         "--out",
         default="calibration.json",
@@ -135,7 +137,9 @@ def _scenario_parser(others: Sequence[str]) -> argparse.ArgumentParser:
         ),
         epilog="Other commands: " + ", ".join(others) + " (see hoh-cosim COMMAND --help).",
     )
-    parser.add_argument("scenario", metavar="SCENARIO.yaml")
+    parser.add_argument(
+        "scenario", metavar="SCENARIO.yaml", help="the scenario (see scenarios/ and its README)"
+    )
     parser.add_argument(
         "--out",
         metavar="DIR",

@@ -63,7 +63,9 @@ def add_commands(sub: Any) -> None:
         description="Rebias, then guide the robot by hand until the time is "
         "up, Ctrl-C, or a fault; every cycle is logged (MCAP).",
     )
-    run.add_argument("config", metavar="CONFIG.yaml")
+    run.add_argument(
+        "config", metavar="CONFIG.yaml", help="the rig's configuration (hoh_cosim.hardware.config)"
+    )
     run.add_argument("--seconds", type=float, metavar="S", help="end after S seconds")
     run.add_argument(
         "--log",
@@ -85,7 +87,9 @@ def add_commands(sub: Any) -> None:
         description="Move through static poses, average the FT-150 at each, "
         "identify the tool and write calibration.json (and poses.csv).",
     )
-    cal.add_argument("config", metavar="CONFIG.yaml")
+    cal.add_argument(
+        "config", metavar="CONFIG.yaml", help="the rig's configuration (hoh_cosim.hardware.config)"
+    )
     cal.add_argument("--out", metavar="FILE", help="default: the config's calibration file")
     cal.add_argument(
         "--samples",
@@ -118,9 +122,26 @@ def add_commands(sub: Any) -> None:
         help="the FT-150 stream (port 63351 by default)",
     )
     sensors.add_argument("--probe", metavar="DEVICE", help="the FSE103's serial device")
-    sensors.add_argument("--framing", default="auto", choices=("auto", "seed18", "guide20"))
-    sensors.add_argument("--byte-order", default="auto", choices=("auto", "little", "big"))
-    sensors.add_argument("--seconds", type=float, default=5.0, metavar="S")
+    sensors.add_argument(
+        "--framing",
+        default="auto",
+        choices=("auto", "seed18", "guide20"),
+        help="the FSE103's frame layout: the seed's 18 bytes, the guide's 20, or found from the "
+        "bytes (default: auto)",
+    )
+    sensors.add_argument(
+        "--byte-order",
+        default="auto",
+        choices=("auto", "little", "big"),
+        help="the FSE103's byte order (default: auto, found from the bytes)",
+    )
+    sensors.add_argument(
+        "--seconds",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="how long to read the streams (default: 5); ends at once if every stream fails",
+    )
     sensors.add_argument("--json", action="store_true", help="one JSON object on stdout")
 
     rehearse = hw_sub.add_parser(
@@ -129,14 +150,26 @@ def add_commands(sub: Any) -> None:
         description="Run a session with the real runner, drivers and "
         "log against an emulated UR5, FT-150 stream and FSE103.",
     )
-    rehearse.add_argument("--seconds", type=float, default=20.0, metavar="S")
-    rehearse.add_argument("--task", choices=TASKS, default="circle")
+    rehearse.add_argument(
+        "--seconds",
+        type=float,
+        default=20.0,
+        metavar="S",
+        help="the session's length after the rebias (default: 20)",
+    )
+    rehearse.add_argument(
+        "--task",
+        choices=TASKS,
+        default="circle",
+        help="what the emulated operator's hand does (default: circle; press and scan put a "
+        "phantom 3 cm under the probe)",
+    )
     rehearse.add_argument(
         "--rate",
         type=float,
         default=500.0,
         choices=(125.0, 500.0),
-        help="the robot's rate in Hz: 125 (CB3) or 500 (e-series)",
+        help="the robot's rate in Hz: 125 (CB3) or 500 (e-series) (default: 500)",
     )
     rehearse.add_argument(
         "--fault",
@@ -145,7 +178,8 @@ def add_commands(sub: Any) -> None:
         default=[],
         type=_fault,
         metavar="KIND@S",
-        help=f"schedule a fault, e.g. ft_stall@12 (repeatable); KIND: {', '.join(FAULTS)}",
+        help=f"schedule a fault at S s of the world's clock, e.g. ft_stall@12 (repeatable); KIND: "
+        f"{', '.join(FAULTS)}",
     )
     rehearse.add_argument(
         "--log",
@@ -153,7 +187,13 @@ def add_commands(sub: Any) -> None:
         default=None,
         help="the session log (default: sessions/rehearsal-<time>.mcap)",
     )
-    rehearse.add_argument("--rebias-samples", type=int, default=500, metavar="N")
+    rehearse.add_argument(
+        "--rebias-samples",
+        type=int,
+        default=500,
+        metavar="N",
+        help="FT-150 samples averaged by the rebias (default: 500, 2.5 s at 200 Hz)",
+    )
     rehearse.add_argument(
         "--ur-emulator",
         metavar="HOST",
@@ -177,7 +217,7 @@ def add_commands(sub: Any) -> None:
         description="Feed a session log's recorded inputs to the estimator and "
         "controller with other settings; plot recorded against replayed.",
     )
-    rep.add_argument("log", metavar="LOG.mcap")
+    rep.add_argument("log", metavar="LOG.mcap", help="a session log of hw run or hw rehearse")
     rep.add_argument(
         "--set",
         dest="overrides",

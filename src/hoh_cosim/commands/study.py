@@ -59,7 +59,11 @@ def add_commands(sub) -> None:
             "with the varied parameters, every metric, status and wall time."
         ),
     )
-    sweep.add_argument("sweep", metavar="SWEEP.yaml")
+    sweep.add_argument(
+        "sweep",
+        metavar="SWEEP.yaml",
+        help="the sweep (see studies/slopes.yaml, hoh_cosim.study.sweep)",
+    )
     sweep.add_argument("--out", metavar="DIR", help="default: sweeps/<sweep name>")
     sweep.add_argument("--engine", choices=("inprocess", "fmu"), help="instead of the file's")
     _cluster_options(sweep)
