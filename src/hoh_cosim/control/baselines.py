@@ -23,7 +23,6 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import signal
 
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar
 from hoh_cosim.errors import ConfigError
@@ -77,6 +76,11 @@ class ButterworthFilter:
     """
 
     def __init__(self, params: ButterworthParams, size: int = 3) -> None:
+        # scipy.signal takes most of a second to import and only this filter needs it: imported
+        # when a filter is built, never on a tick
+        from scipy.signal import butter, sosfilt, sosfilt_zi
+
+        self._butter, self._sosfilt, self._sosfilt_zi = butter, sosfilt, sosfilt_zi
         self.params = params
         self.size = size
         self._dt = math.nan
@@ -93,10 +97,10 @@ class ButterworthFilter:
                 f"cutoff_hz: must be below the Nyquist frequency {nyquist:g} Hz of dt = {dt} s, "
                 f"got {self.params.cutoff_hz}"
             )
-        self._sos = signal.butter(
+        self._sos = self._butter(
             self.params.order, self.params.cutoff_hz, fs=1.0 / dt, output="sos"
         )
-        self._zi_unit = signal.sosfilt_zi(self._sos)  # (sections, 2) for a unit step
+        self._zi_unit = self._sosfilt_zi(self._sos)  # (sections, 2) for a unit step
         self._dt = dt
 
     def step(self, dt: float, z: Vec | None) -> Vec:
@@ -110,7 +114,7 @@ class ButterworthFilter:
                 self._zi = self._zi_unit[:, :, np.newaxis] * self._held[np.newaxis, np.newaxis, :]
         if self._held is None:
             return np.zeros(self.size)
-        y, self._zi = signal.sosfilt(self._sos, self._held[np.newaxis, :], axis=0, zi=self._zi)
+        y, self._zi = self._sosfilt(self._sos, self._held[np.newaxis, :], axis=0, zi=self._zi)
         return y[0]
 
 

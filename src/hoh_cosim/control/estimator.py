@@ -77,6 +77,7 @@ __all__ = [
     "FilterBank",
     "SignalFilter",
     "default_kalman",
+    "import_filter_libraries",
     "make_filter_bank",
 ]
 
@@ -235,6 +236,16 @@ class _SeparateFilters:
         return np.concatenate(
             [f.step(dt, z) for f, z in zip(self.filters, measurements, strict=True)]
         )
+
+
+def import_filter_libraries(params: EstimatorParams) -> None:
+    """Import now what `params.filter` imports when it is built or first stepped (scipy.signal for
+    the Butterworth filter, python-control for the steady-state Kalman gain: each most of a
+    second), so that a real-time loop that builds or steps the estimator later never waits for it."""
+    if params.filter == "butterworth":
+        import scipy.signal  # noqa: F401
+    elif params.filter == "steady_kalman":
+        import control  # noqa: F401
 
 
 def make_filter_bank(params: EstimatorParams) -> FilterBank:

@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from filterpy.common import Q_discrete_white_noise
 
 from hoh_cosim.control.vectors import Vec, Vec3, as_positive_vector, frozen
 from hoh_cosim.errors import ConfigError
@@ -86,9 +85,23 @@ def transition_matrix(dt: float) -> Vec:
     return np.kron(axis_transition(dt), np.eye(3))
 
 
+def _unit_white_noise(dt: float) -> Vec:
+    """The discrete white-noise process noise of a constant-acceleration axis for unit variance:
+    filterpy's `Q_discrete_white_noise(dim=3, dt=dt, var=1.0)`, the same numbers (a test checks it
+    against filterpy). Written out here because importing filterpy imports scipy.stats, most of a
+    second of every run's start-up, for this one 3x3 formula."""
+    return np.array(
+        [
+            [0.25 * dt**4, 0.5 * dt**3, 0.5 * dt**2],
+            [0.5 * dt**3, dt**2, dt],
+            [0.5 * dt**2, dt, 1.0],
+        ]
+    )
+
+
 def process_noise(dt: float, q: Vec) -> Vec:
     """(n_axes, 3, 3) process noise: filterpy's `Q_discrete_white_noise(3, dt, var=q·dt)` per axis."""
-    unit = Q_discrete_white_noise(dim=3, dt=dt, var=1.0)
+    unit = _unit_white_noise(dt)
     return (
         unit[np.newaxis, :, :] * (np.asarray(q, dtype=np.float64) * dt)[:, np.newaxis, np.newaxis]
     )

@@ -39,7 +39,7 @@ import numpy as np
 
 from hoh_cosim.control.controller import HandGuidingController
 from hoh_cosim.control.cycle import ControlBlocks, Reading, SensorSetup, control_cycle
-from hoh_cosim.control.estimator import Estimator
+from hoh_cosim.control.estimator import Estimator, import_filter_libraries
 from hoh_cosim.control.gravity import GravityCalibration, GravityModel
 from hoh_cosim.control.supervisor import SessionPolicy, robot_cause
 from hoh_cosim.control.vectors import Vec
@@ -277,6 +277,9 @@ class Runner:
         cause, clean = "", False
         sources = [s for s in (self.ft, self.probe) if s is not None]
         try:
+            # a filter imports its library when it is built or first stepped (up to a second):
+            # imported now, not between two of the watchdog's cycles below
+            import_filter_libraries(self.config.estimator)
             self.robot.connect()
             for source in sources:
                 source.start()
