@@ -64,7 +64,9 @@ def add_commands(sub) -> None:
         metavar="SWEEP.yaml",
         help="the sweep (see studies/slopes.yaml, hoh_cosim.study.sweep)",
     )
-    sweep.add_argument("--out", metavar="DIR", help="default: sweeps/<sweep name>")
+    sweep.add_argument(
+        "--out", metavar="DIR", help="the results directory (default: sweeps/<sweep name>)"
+    )
     sweep.add_argument("--engine", choices=("inprocess", "fmu"), help="instead of the file's")
     _cluster_options(sweep)
 
@@ -77,10 +79,19 @@ def add_commands(sub) -> None:
             "and summary.json."
         ),
     )
-    report.add_argument("--out", metavar="DIR", default="report", help="default: report")
-    report.add_argument("--quick", action="store_true", help="fewer, shorter runs (~1-2 min)")
     report.add_argument(
-        "--scenarios", metavar="DIR", default="scenarios", help="default: ./scenarios"
+        "--out", metavar="DIR", default="report", help="the report's directory (default: report)"
+    )
+    report.add_argument(
+        "--quick",
+        action="store_true",
+        help="fewer, shorter runs: under a minute on 2 cores (default: the full report)",
+    )
+    report.add_argument(
+        "--scenarios",
+        metavar="DIR",
+        default="scenarios",
+        help="where circles.yaml and the other scenarios are (default: ./scenarios)",
     )
     _cluster_options(report)
 
@@ -93,12 +104,17 @@ def add_commands(sub) -> None:
             "rest; write candidates.csv and best.json."
         ),
     )
-    tune.add_argument("--out", metavar="DIR", default="tune", help="default: tune")
+    tune.add_argument(
+        "--out", metavar="DIR", default="tune", help="the tuning's directory (default: tune)"
+    )
     tune.add_argument("-n", type=int, default=40, metavar="N", help="candidates (default 40)")
     tune.add_argument("--seed", type=int, default=1, help="of the candidate sample (default 1)")
     tune.add_argument("--seeds", type=_seeds, default=(1, 2), help="scenario seeds (default 1,2)")
     tune.add_argument(
-        "--scenarios", metavar="DIR", default="scenarios", help="default: ./scenarios"
+        "--scenarios",
+        metavar="DIR",
+        default="scenarios",
+        help="where circles.yaml and the other scenarios are (default: ./scenarios)",
     )
     _cluster_options(tune)
 
@@ -113,15 +129,24 @@ def add_commands(sub) -> None:
         ),
     )
     probe.add_argument(
-        "--out", metavar="DIR", default="probe_correction", help="default: probe_correction"
+        "--out",
+        metavar="DIR",
+        default="probe_correction",
+        help="the results directory (default: probe_correction)",
     )
     probe.add_argument("--seed", type=int, default=1, help="of the recordings (default 1)")
     probe.add_argument(
-        "--engine", choices=("inprocess", "fmu"), default="inprocess", help="default: inprocess"
+        "--engine",
+        choices=("inprocess", "fmu"),
+        default="inprocess",
+        help="how the runs step their components (default: inprocess)",
     )
     probe.add_argument("--quick", action="store_true", help="shorter recordings and runs")
     probe.add_argument(
-        "--scenarios", metavar="DIR", default="scenarios", help="default: ./scenarios"
+        "--scenarios",
+        metavar="DIR",
+        default="scenarios",
+        help="where circles.yaml and the other scenarios are (default: ./scenarios)",
     )
     _cluster_options(probe)
 
