@@ -11,22 +11,12 @@ from hoh_cosim.control.block import zero_inputs
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.supervisor import LimitParams, Status
 from hoh_cosim.errors import ConfigError
+from tests.estimates import controller_inputs
 
 DT = 2e-3  # a 500 Hz robot
 
 
-def inputs(**overrides):
-    base = {
-        "F_hand_B": np.zeros(3),
-        "tau_hand_B": np.zeros(3),
-        "F_probe_B": np.zeros(3),
-        "ft_age": np.array([0.0]),
-        "probe_age": np.array([0.0]),
-        "ready": np.array([1.0]),
-        "p_BT_B": np.array([0.3, 0.0, 0.3]),
-    }
-    base.update({k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in overrides.items()})
-    return base
+inputs = controller_inputs
 
 
 def settle(ctl, seconds=1.0, **overrides):

@@ -14,6 +14,7 @@ from hoh_cosim.control.supervisor import (
     robot_cause,
     supervise,
 )
+from tests.estimates import controller_inputs
 
 ROBOT = "UR5 at 192.168.0.10"
 FT = "FT-150 at 192.168.1.1"
@@ -25,19 +26,7 @@ MOVING = np.array([0.03, -0.02, 0.01, 0.0, 0.1, -0.05])  # a twist inside every 
 HELD = np.zeros(6)  # what the controller commands on a stop flag
 
 
-def estimate(**overrides):
-    """One tick's estimate (the controller's inputs): fresh, ready, no force."""
-    base = {
-        "F_hand_B": np.zeros(3),
-        "tau_hand_B": np.zeros(3),
-        "F_probe_B": np.zeros(3),
-        "ft_age": np.array([0.0]),
-        "probe_age": np.array([0.0]),
-        "ready": np.array([1.0]),
-        "p_BT_B": np.array([0.3, 0.0, 0.3]),
-    }
-    base.update({k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in overrides.items()})
-    return base
+estimate = controller_inputs
 
 
 def verdict_of(status, twist=MOVING, policy=POLICY, *, ft=None, probe=None, **kwargs):

@@ -48,6 +48,24 @@ def _fault(text: str) -> Fault:
     return Fault(at_s, kind)
 
 
+def _add_config(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "config", metavar="CONFIG.yaml", help="the rig's configuration (hoh_cosim.hardware.config)"
+    )
+
+
+def _add_block_overrides(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="B.P=V",
+        help="estimator.x=v or controller.x=v (repeatable; default: the config's or the log's "
+        "parameters)",
+    )
+
+
 def add_commands(sub: Any) -> None:
     """The `hw` and `replay` subcommands, on the main parser's subparsers."""
     hw = sub.add_parser(
@@ -63,23 +81,14 @@ def add_commands(sub: Any) -> None:
         description="Rebias, then guide the robot by hand until the time is "
         "up, Ctrl-C, or a fault; every cycle is logged (MCAP).",
     )
-    run.add_argument(
-        "config", metavar="CONFIG.yaml", help="the rig's configuration (hoh_cosim.hardware.config)"
-    )
+    _add_config(run)
     run.add_argument("--seconds", type=float, metavar="S", help="end after S seconds")
     run.add_argument(
         "--log",
         metavar="FILE",
         help="the session log (default: in the config's log_dir, named by date and time)",
     )
-    run.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="B.P=V",
-        help="estimator.x=v or controller.x=v (repeatable)",
-    )
+    _add_block_overrides(run)
 
     cal = hw_sub.add_parser(
         "calibrate",
@@ -87,10 +96,12 @@ def add_commands(sub: Any) -> None:
         description="Move through static poses, average the FT-150 at each, "
         "identify the tool and write calibration.json (and poses.csv).",
     )
+    _add_config(cal)
     cal.add_argument(
-        "config", metavar="CONFIG.yaml", help="the rig's configuration (hoh_cosim.hardware.config)"
+        "--out",
+        metavar="FILE",
+        help="where to write the calibration (default: the config's calibration file)",
     )
-    cal.add_argument("--out", metavar="FILE", help="default: the config's calibration file")
     cal.add_argument(
         "--samples",
         type=int,
@@ -218,15 +229,10 @@ def add_commands(sub: Any) -> None:
         "controller with other settings; plot recorded against replayed.",
     )
     rep.add_argument("log", metavar="LOG.mcap", help="a session log of hw run or hw rehearse")
+    _add_block_overrides(rep)
     rep.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="B.P=V",
-        help="estimator.x=v or controller.x=v (repeatable)",
+        "--out", metavar="DIR", help="the results directory (default: runs/replay-<log name>)"
     )
-    rep.add_argument("--out", metavar="DIR", help="default: runs/replay-<log name>")
 
 
 def _stamp() -> str:
