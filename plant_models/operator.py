@@ -52,7 +52,6 @@ from plant_models.tasks import CONTACT_TASKS, PLANES, TASKS, TaskName
 __all__ = ["PLANES", "TASKS", "Operator", "OperatorParams"]
 
 
-
 @dataclass(frozen=True)
 class OperatorParams:
     task: TaskName = "circle"

@@ -1,5 +1,7 @@
 """The faults a rehearsal can inject: a closed set, in a module light enough for a command line.
 
+Each happens at a time of the rehearsal world's clock (`Fault.at_s`):
+
     probe_unplug     the FSE103's pty closes
     ft_stall         the FT-150 stream stays open and goes quiet
     ft_garbage       junk bytes in the FT-150 stream
