@@ -1,4 +1,5 @@
-"""Shared fixtures: a seeded random generator and deterministic property tests."""
+"""Shared fixtures: a seeded random generator, deterministic property tests, and a check that
+pytest-xdist keeps its groups."""
 
 from __future__ import annotations
 
@@ -19,3 +20,24 @@ settings.load_profile("deterministic")
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20260522)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Refuse a run whose pytest-xdist would ignore the groups of tests/xdist_groups.py: with pytest
+    9.2, pytest-xdist 3.8's `--dist loadgroup` no longer marks the grouped tests and spreads them like
+    any other (pytest-xdist issue 1386), so that a module's expensive run is made on every worker and
+    the real-time tests run two at a time. pyproject.toml keeps pytest below 9.2 for that."""
+    if getattr(config.option, "dist", "no") != "loadgroup":
+        return
+    from importlib.metadata import version
+
+    from packaging.version import Version
+
+    if Version(pytest.__version__) >= Version("9.2") and Version(
+        version("pytest-xdist")
+    ) <= Version("3.8.0"):
+        raise pytest.UsageError(
+            f"pytest {pytest.__version__} with pytest-xdist {version('pytest-xdist')}: "
+            "--dist loadgroup ignores the xdist_group marks (pytest-xdist issue 1386); "
+            'install the test extra (pytest below 9.2): pip install ".[test]"'
+        )

@@ -16,6 +16,9 @@ from tests.integration.test_scenarios import SCENARIOS
 PNG = b"\x89PNG\r\n\x1a\n"
 STOP = "probe force above the stop limit"
 
+# one worker runs this module (tests/xdist_groups.py): the study is made once
+pytestmark = pytest.mark.xdist_group(__name__)
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory: pytest.TempPathFactory) -> Path:

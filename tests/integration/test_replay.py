@@ -21,11 +21,15 @@ from hoh_cosim.errors import ConfigError, InputFileError
 from hoh_cosim.hardware.replay import replay
 from hoh_cosim.hardware.session_log import SessionLog, read_session
 from hoh_cosim.params import leaves
+from tests.xdist_groups import REAL_TIME
 
 if TYPE_CHECKING:
     from hoh_cosim.rehearsal.rehearse import RehearsalResult
 
-pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="the rehearsal needs POSIX ptys")
+pytestmark = [
+    pytest.mark.skipif(sys.platform == "win32", reason="the rehearsal needs POSIX ptys"),
+    REAL_TIME,  # the recording
+]
 pytest.importorskip("mcap")
 pytest.importorskip("serial")
 

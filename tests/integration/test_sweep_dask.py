@@ -20,6 +20,9 @@ from tests.integration.test_scenarios import SCENARIOS
 
 DASK = Path(sys.executable).parent / "dask"
 
+# one worker runs this module (tests/xdist_groups.py): one Dask cluster for the module
+pytestmark = pytest.mark.xdist_group(__name__)
+
 
 @pytest.fixture(scope="module")
 def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:

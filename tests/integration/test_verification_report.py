@@ -15,6 +15,9 @@ from tests.integration.test_scenarios import SCENARIOS
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
+# one worker runs this module (tests/xdist_groups.py): the report is made once
+pytestmark = pytest.mark.xdist_group(__name__)
+
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory: pytest.TempPathFactory) -> Path:

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
+from hoh_cosim.hardware import robot
 from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, Pacer, RobotState
 
 
@@ -40,25 +39,53 @@ def test_the_state_says_why_the_robot_cannot_be_commanded(changes, problem):
     assert state(**changes).problem() == problem
 
 
-def test_the_pacer_keeps_an_absolute_schedule():
+class SimulatedClock:
+    """The `time` of hoh_cosim.hardware.robot on a simulated clock, so that a pacer test neither
+    waits on the wall clock nor depends on how busy the machine is: `sleep` advances it exactly,
+    and every reading advances it by `tick_s` (the pacer spins on the clock until its target)."""
+
+    def __init__(self, tick_s: float = 1e-6) -> None:
+        self.now = 1000.0
+        self.tick_s = tick_s
+
+    def perf_counter(self) -> float:
+        self.now += self.tick_s
+        return self.now
+
+    monotonic = perf_counter
+
+    def sleep(self, seconds: float) -> None:
+        assert seconds >= 0.0
+        self.now += seconds
+
+
+@pytest.fixture
+def clock(monkeypatch) -> SimulatedClock:
+    simulated = SimulatedClock()
+    monkeypatch.setattr(robot, "time", simulated)
+    return simulated
+
+
+def test_the_pacer_keeps_an_absolute_schedule(clock):
     period = 0.004
     pacer = Pacer(period)
-    start = time.perf_counter()
+    start = clock.perf_counter()
     assert pacer.wait() == 0.0  # the first cycle starts the schedule
     for _ in range(50):
+        clock.sleep(0.25 * period)  # the cycle's work
         pacer.wait()
-    elapsed = time.perf_counter() - start
+    elapsed = clock.perf_counter() - start
     # 50 periods after the first start, not 50 periods plus the work between the waits
     assert elapsed == pytest.approx(50 * period, abs=0.5 * period)
     assert pacer.overruns == 0
 
 
-def test_a_late_cycle_is_reported_and_an_overrun_restarts_the_schedule():
+def test_a_late_cycle_is_reported_and_an_overrun_restarts_the_schedule(clock):
     period = 0.002
     pacer = Pacer(period)
     pacer.wait()
     pacer.wait()
-    time.sleep(5 * period)  # the work of this cycle takes five periods
+    clock.sleep(5 * period)  # the work of this cycle takes five periods
     late = pacer.wait()
     assert late > 3 * period
     assert pacer.overruns == 1

@@ -278,6 +278,8 @@ def _path_figure(
     i, j = PLANES[plane]
     window = _circle_window(op, float(rec.time[-1]))
     t0, t1 = window if window else (op.params.start_s, float(rec.time[-1]))
+    if t0 > t1:  # the run ends before the hand takes the handle: draw all of it
+        t0 = 0.0
     what = (
         "whole circles after the speed ramp: the metric's window" if window else "no whole circle"
     )
