@@ -212,7 +212,9 @@ def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):
 
 
 def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):
-    with RehearsalWorld(WorldSetup(task="off")) as world:
+    # the calibration's loop kicks the watchdog from this process, which shares the cores with the
+    # rest of the suite: 200 ms, as in run_session, so that only a real hang trips it
+    with RehearsalWorld(WorldSetup(task="off", watchdog_hz=5.0)) as world:
         params = SequencerParams(
             tilts=2,
             tilt_min_deg=20.0,

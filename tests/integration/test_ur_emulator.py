@@ -242,7 +242,8 @@ def test_an_injected_fault_stops_the_runner_and_names_the_cause(rig, tmp_path, f
         ur.inject(fault)
     finally:
         output = finished(process, log, 30)
-    assert cause in output, output
+    ur.said("")  # collect the emulator's events, for the message
+    assert cause in output, output + "\nemulator:\n" + "\n".join(text for _, text in ur.events)
     if fault == "drop_connection":
         # the runner stops and says why; then ur_rtde 1.6.5's own reconnecting thread may abort
         # the process on its way out ("terminate called ... read: End of file", SIGABRT)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hoh_cosim.hardware import robot
-from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, Pacer, RobotState
+from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, Pacer, RobotState, named_problem
 
 
 def state(**changes) -> RobotState:
@@ -37,6 +37,32 @@ def state(**changes) -> RobotState:
 )
 def test_the_state_says_why_the_robot_cannot_be_commanded(changes, problem):
     assert state(**changes).problem() == problem
+
+
+class _Readings:
+    """A robot whose successive `state()` readings are given: the two RTDE streams' race."""
+
+    period_s = 0.002
+
+    def __init__(self, *readings: RobotState) -> None:
+        self.readings = list(readings)
+
+    def state(self) -> RobotState:
+        return self.readings.pop(0) if len(self.readings) > 1 else self.readings[0]
+
+
+def test_a_stopped_program_is_read_again_for_the_stop_that_stopped_it():
+    stopped = state(program_running=False)
+    later = _Readings(stopped, state(program_running=False, protective_stop=True))
+    assert named_problem(later, stopped) == "the robot is in a protective stop"
+    # no reason comes: the stopped program is the cause, after the settling time and no longer
+    alone = _Readings(stopped)
+    assert named_problem(alone, stopped, settle_s=0.02) == (
+        "the control program on the robot is not running"
+    )
+    # a named stop or a running robot is not read again
+    assert named_problem(_Readings(), state(emergency_stop=True)) == "the robot is emergency-stopped"
+    assert named_problem(_Readings(), state()) is None
 
 
 class SimulatedClock:

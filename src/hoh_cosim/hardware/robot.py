@@ -28,7 +28,15 @@ from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.vectors import Rot3, Vec, Vec3
 from hoh_cosim.errors import RunError
 
-__all__ = ["ROBOT_MODE_RUNNING", "SAFETY_MODE_NORMAL", "Pacer", "Robot", "RobotState", "RtdeRobot"]
+__all__ = [
+    "ROBOT_MODE_RUNNING",
+    "SAFETY_MODE_NORMAL",
+    "Pacer",
+    "Robot",
+    "RobotState",
+    "RtdeRobot",
+    "named_problem",
+]
 
 ROBOT_MODE_RUNNING = 7
 """UR's robot mode when the arm is powered, brakes released and ready (RTDE `robot_mode`)."""
@@ -76,6 +84,29 @@ class Robot(Protocol):
     def stop(self) -> None: ...
     def close(self) -> None: ...
     def describe(self) -> str: ...
+
+
+def named_problem(robot: Robot, state: RobotState, settle_s: float = 0.05) -> str | None:
+    """`state.problem()`, with the reason for a stopped program if one comes within `settle_s`.
+
+    The program's status and the safety status reach us over two RTDE connections (ur_rtde's
+    control and receive interfaces), so a protective or emergency stop, which also stops the
+    program, can show as "program not running" a packet before its safety bits arrive. The robot
+    has stopped by then; reading it again for a few cycles costs nothing and names the first cause.
+    """
+    problem = state.problem()
+    if problem is None or state.emergency_stop or state.protective_stop or state.program_running:
+        return problem
+    deadline = time.monotonic() + settle_s
+    while time.monotonic() < deadline:
+        time.sleep(robot.period_s)
+        try:
+            later = robot.state().problem()
+        except RunError:  # the link went: the first reading stands
+            break
+        if later is not None and later != problem:
+            return later
+    return problem
 
 
 class Pacer:

@@ -45,7 +45,7 @@ from hoh_cosim.control.supervisor import SessionPolicy, robot_cause
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.config import HardwareConfig
-from hoh_cosim.hardware.robot import Robot, RobotState
+from hoh_cosim.hardware.robot import Robot, RobotState, named_problem
 from hoh_cosim.hardware.session_log import CycleRecord, SessionLog
 from hoh_cosim.hardware.streams import Mailbox, ReaderThread, Sample
 from hoh_cosim.params import leaves
@@ -160,7 +160,7 @@ class Runner:
         """One cycle of standing still (zero twist, watchdog kicked); the state read."""
         pacer.wait()
         state = self.robot.state()
-        problem = state.problem()
+        problem = named_problem(self.robot, state)
         if problem is not None:
             raise RunError(f"{self.robot.describe()}: {problem}")
         self.robot.speed_l(np.zeros(6), self.config.robot.acceleration)
@@ -339,7 +339,7 @@ class Runner:
             self.timing.overruns = pacer.overruns - overruns_before
             start = time.perf_counter()
             state = self.robot.state()
-            problem = state.problem()
+            problem = named_problem(self.robot, state)
             if problem is not None:  # the robot stopped itself: nothing to compute
                 self._event("stop", problem)
                 return robot_cause(policy, problem), False
