@@ -61,7 +61,9 @@ def test_a_stopped_program_is_read_again_for_the_stop_that_stopped_it():
         "the control program on the robot is not running"
     )
     # a named stop or a running robot is not read again
-    assert named_problem(_Readings(), state(emergency_stop=True)) == "the robot is emergency-stopped"
+    assert (
+        named_problem(_Readings(), state(emergency_stop=True)) == "the robot is emergency-stopped"
+    )
     assert named_problem(_Readings(), state()) is None
 
 
