@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim.rehearsal import rtde_protocol as rtde
+from hoh_cosim.rehearsal.world import as_hardware
 
 __all__ = ["INJECTIONS", "UrController", "rotation_vector"]
 
@@ -194,6 +195,7 @@ class _SharedWorld:
 
 
 def _emulator_main(options: dict, state: Any, command: Any, control: Any, events: Any) -> None:
+    as_hardware()  # the robot's controller is hardware of its own
     emulator = _Emulator(_SharedWorld(state, command), events=events, **options)
     try:
         emulator.start()

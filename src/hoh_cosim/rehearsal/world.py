@@ -42,12 +42,20 @@ from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Params, FT150Sensor
 from plant_models.tissue import PhantomParams
 
-__all__ = ["FAULTS", "Fault", "RehearsalWorld", "SeqLock", "SimulatedRobot", "WorldSetup"]
+__all__ = [
+    "FAULTS",
+    "Fault",
+    "RehearsalWorld",
+    "SeqLock",
+    "SimulatedRobot",
+    "WorldSetup",
+    "as_hardware",
+]
 
 WORLD_DT = 1e-3
 
 # shared memory: [sequence, values...], written under a sequence lock (no lock a reader could
-# wait on: the world runs at a lower priority than the runner, which must never wait for it)
+# wait on: the runner must never wait for another process)
 _STATE = 3 + 9 + 6 + 6 + 6  # p, R, twist, [mode, safety, protective, emergency, program, time], q
 _COMMAND = 6 + 4  # twist, [acceleration, kick time, stop, sequence]
 
@@ -68,7 +76,7 @@ class SeqLock:
 
     def read(self, tries: int = 1000) -> Vec:
         """The latest consistent copy. A writer caught mid-write is not waited for beyond `tries`:
-        it may be a lower-priority process that the scheduler has put aside (priority inversion),
+        it may be a process that the scheduler has put aside (on a busy machine),
         so the previous copy, at most one write old, is returned instead."""
         for _ in range(tries):
             before = self.array[0]
@@ -99,10 +107,18 @@ class WorldSetup:
             raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {self.task!r}")
 
 
-def _world_main(setup: WorldSetup, state: Any, command: Any, ready: Any, stop: Any) -> None:
-    # the devices yield to the runner: on a rig they are separate hardware, here they share cores
+def as_hardware() -> None:
+    """Raise this process above ordinary ones where the system permits (nice -10, which needs
+    CAP_SYS_NICE, as root has): on a rig the emulated devices are separate hardware with their own
+    clocks, and they must keep their rates however busy the machine is, or a rehearsal would see
+    silent devices where there are none. Not permitted: the default priority, and a loaded machine
+    can slow the devices (the rehearsal's rate check then says so)."""
     with contextlib.suppress(OSError):
-        os.nice(10)
+        os.setpriority(os.PRIO_PROCESS, 0, -10)
+
+
+def _world_main(setup: WorldSetup, state: Any, command: Any, ready: Any, stop: Any) -> None:
+    as_hardware()
     try:
         world = _World(setup, state, command)
     except Exception as exc:  # report, do not hang the parent
