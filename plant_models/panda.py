@@ -13,8 +13,8 @@ Figures:
 The probe (ours, with the UR5 tool's figures): a 0.48 kg cylinder of 3 cm radius and 0.2 m along the
 flange's z axis, its tip the TCP, with the flange's orientation.
 
-The plant integrates the forward dynamics (pinocchio's ABA) with semi-implicit Euler in `substeps`
-per master step (default 1 ms steps of 2 x 0.5 ms; the seed simulated with 3 ms steps):
+The plant integrates the forward dynamics (pinocchio's ABA) with semi-implicit Euler, `substeps`
+per millisecond whatever the master's step (default 2 x 0.5 ms; the seed simulated with 3 ms steps):
 
     B(q) q̈ + C(q, q̇) q̇ + τ_f(q̇) + g(q) = τ_cmd + g(q) + Jᵀ(q) F_contact
 
@@ -169,7 +169,7 @@ class PandaParams:
     tool_length_m: float = 0.20  # [m] flange to tip
     friction: bool = True  # Gaz et al.'s joint friction
     gravity_compensation: bool = True  # the robot adds g(q) to the command, as Franka's does
-    substeps: int = 2  # integration steps per master step
+    substeps: int = 2  # integration steps per millisecond (per 1 ms master step)
     phantom: PhantomParams = field(default_factory=PhantomParams)
     g_B: Vec3 = field(default_factory=lambda: GRAVITY_B.copy())  # [m/s²]
 
@@ -202,6 +202,7 @@ class PandaPlant:
     A step holds the commanded torque over [t, t + dt] and returns the state at t + dt.
     """
 
+    variable_step: ClassVar[bool] = True  # `substeps` per millisecond whatever the step
     inputs: ClassVar[tuple[Port, ...]] = (
         Port("tau_cmd", 7, "N.m", "commanded joint torques, gravity excluded (the robot adds it)"),
     )
@@ -275,8 +276,9 @@ class PandaPlant:
         p = self.params
         pin, m, d = self.pin, self.model, self.data
         tau_cmd = np.clip(inputs["tau_cmd"], -self._tau_max, self._tau_max)
-        h = dt / p.substeps
-        for _ in range(p.substeps):
+        n = max(1, math.ceil(dt * 1e3 * p.substeps - 1e-9))  # a step of any length: the same h
+        h = dt / n
+        for _ in range(n):
             _, _, tau_contact = self._contact()
             tau = tau_cmd + tau_contact
             if p.gravity_compensation:

@@ -45,6 +45,7 @@ class PlantParams:
 class Plant:
     """UR5 + tool + phantom under the block contract."""
 
+    variable_step: ClassVar[bool] = True  # every robot cycle that starts within a step
     inputs: ClassVar[tuple[Port, ...]] = (
         Port("twist_cmd_B", 6, TWIST_UNITS, "speedL command: TCP twist [v; ω] in the base frame"),
         Port("F_hand_B", 3, "N", "force of the hand on the handle, in B"),
@@ -92,11 +93,20 @@ class Plant:
         return self._outputs
 
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
-        cycle = math.floor(t / self.arm.period + 1e-9)
-        if cycle != self._cycle:
-            self._cycle = cycle
-            self.arm.cycle(inputs["twist_cmd_B"])
-        self.arm.advance(dt)
+        # every robot cycle that starts within the step, with the command held over the step: a
+        # step of any length gives what steps of 1 ms give
+        arm, left = self.arm, dt
+        while True:
+            cycle = math.floor(t / arm.period + 1e-9)
+            if cycle != self._cycle:
+                self._cycle = cycle
+                arm.cycle(inputs["twist_cmd_B"])
+            boundary = (cycle + 1) * arm.period
+            if boundary >= t + left - 1e-9 * arm.period:  # the same tolerance as the floor's
+                arm.advance(left)
+                break
+            arm.advance(boundary - t)
+            left, t = t + left - boundary, boundary
         self._outputs = self._evaluate(inputs["F_hand_B"], inputs["tau_hand_B"], inputs["F_tip_B"])
         return self._outputs
 

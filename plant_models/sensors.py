@@ -106,6 +106,7 @@ class _PacketSensor:
     """What both sensors share: a packet clock sampling `_measure(true)` per packet, and the last
     delivered packet held with its counter."""
 
+    variable_step: ClassVar[bool] = True  # packets at their own times: every one in a long step
     true_port: ClassVar[str]
     value_port: ClassVar[str]
     size: ClassVar[int]

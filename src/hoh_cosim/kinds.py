@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from hoh_cosim.control.block import make_block, takes_rng
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
@@ -19,7 +21,7 @@ from plant_models.panda import PandaParams, PandaPlant
 from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Params, FT150Sensor
 
-__all__ = ["KINDS", "ComponentKind", "make_block"]
+__all__ = ["KINDS", "ComponentKind", "input_starts", "make_block"]
 
 
 @dataclass(frozen=True)
@@ -29,6 +31,9 @@ class ComponentKind:
     params: type
     fmu_script: str  # the entry script's module name in fmus/ (unique across FMUs)
     description: str
+    # the kind whose initial outputs (default parameters) give this one's input start values, port
+    # by port where the names and sizes agree: an FMU run alone sees a physically valid world
+    starts_from: str | None = None
 
     @property
     def random(self) -> bool:
@@ -45,6 +50,7 @@ KINDS: dict[str, ComponentKind] = {
             OperatorParams,
             "hoh_operator",
             "the sonographer's hand: a delayed impedance driving a task",
+            starts_from="plant",
         ),
         ComponentKind(
             "plant", Plant, PlantParams, "hoh_plant", "UR5 under speedL, probe housing and phantom"
@@ -69,6 +75,7 @@ KINDS: dict[str, ComponentKind] = {
             EstimatorParams,
             "hoh_estimator",
             "rebias, gravity compensation, Kalman filters, alignment",
+            starts_from="plant",
         ),
         ComponentKind(
             "controller",
@@ -76,6 +83,7 @@ KINDS: dict[str, ComponentKind] = {
             ControllerParams,
             "hoh_controller",
             "admittance, contact compensation, fixture, limits",
+            starts_from="plant",
         ),
         ComponentKind(
             "sequencer",
@@ -83,6 +91,7 @@ KINDS: dict[str, ComponentKind] = {
             SequencerParams,
             "hoh_sequencer",
             "the gravity-calibration drive through static poses",
+            starts_from="plant",
         ),
         ComponentKind(
             "panda",
@@ -97,6 +106,7 @@ KINDS: dict[str, ComponentKind] = {
             ImpedanceParams,
             "hoh_impedance",
             "Cartesian impedance for a torque-controlled arm (seed 001, eq. 3-15)",
+            starts_from="panda",
         ),
         ComponentKind(
             "ur5_impedance",
@@ -104,6 +114,27 @@ KINDS: dict[str, ComponentKind] = {
             PositionImpedanceParams,
             "hoh_ur5_impedance",
             "position-based impedance for the speedL-commanded UR5",
+            starts_from="plant",
         ),
     )
 }
+
+
+def input_starts(kind: str) -> dict[str, np.ndarray]:
+    """Start values of the inputs of `kind` that differ from zero: its `starts_from` kind's initial
+    outputs at default parameters, where a port's name and size agree; a rotation (a 9-element
+    port named R_...) that nothing gives starts as the identity."""
+    spec = KINDS[kind]
+    given: dict[str, np.ndarray] = {}
+    if spec.starts_from is not None:
+        source = KINDS[spec.starts_from]
+        block = make_block(source.block, source.params(), 0)
+        given = {k: np.asarray(v, dtype=float) for k, v in block.initial_outputs().items()}
+    starts: dict[str, np.ndarray] = {}
+    for port in spec.block.inputs:
+        value = given.get(port.name)
+        if value is not None and value.size == port.size:
+            starts[port.name] = value.reshape(port.size).copy()
+        elif port.size == 9 and port.name.startswith("R_"):
+            starts[port.name] = np.eye(3).reshape(9)
+    return {name: value for name, value in starts.items() if np.any(value != 0.0)}

@@ -9,6 +9,12 @@ The input arrays belong to the caller and are refilled in place every step: a bl
 during `step` and neither changes them nor keeps them. The caller copies the output arrays it keeps;
 a block may return the same array objects again while their values stay the same, and never changes
 an array after returning it.
+
+A block's step is its sample period unless the block says otherwise: a controller or a filter is a
+sampled system, and ten steps of 1 ms are not one of 10 ms. A block whose `step` gives the same
+result for one step as for many shorter ones with the inputs held (it runs its own inner cycles and
+integrates at its own rate) sets `variable_step = True`; its FMU then says
+canHandleVariableCommunicationStepSize, and the others refuse a step that differs from their first.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ __all__ = [
     "make_block",
     "port_element_names",
     "takes_rng",
+    "variable_step",
     "zero_inputs",
 ]
 
@@ -80,6 +87,7 @@ def port_element_names(name: str, size: int) -> list[str]:
 class Block(Protocol):
     inputs: ClassVar[tuple[Port, ...]]
     outputs: ClassVar[tuple[Port, ...]]
+    variable_step: ClassVar[bool]  # optional, False if absent (the module's docstring)
 
     def reset(self) -> None: ...
 
@@ -111,6 +119,11 @@ def check_inputs(block: Block, inputs: Mapping[str, object]) -> dict[str, Vec]:
 def zero_inputs(block: Block) -> dict[str, Vec]:
     """A zero array for every input port of `block`."""
     return {p.name: np.zeros(p.size) for p in block.inputs}
+
+
+def variable_step(block_cls: type) -> bool:
+    """Whether a step of any length gives what shorter steps give (the module's docstring)."""
+    return bool(getattr(block_cls, "variable_step", False))
 
 
 def takes_rng(block_cls: type) -> bool:

@@ -12,21 +12,24 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io
+import json
 import os
 import platform
 import shutil
 import sys
 import tempfile
 import zipfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
 
 import hoh_cosim
 import plant_models
+from hoh_cosim.control.block import variable_step
 from hoh_cosim.errors import HohError, RunError
 from hoh_cosim.fmi.model_description import finish_model_description
-from hoh_cosim.fmi.slave import block_interface
-from hoh_cosim.kinds import KINDS
+from hoh_cosim.fmi.slave import INPUT_STARTS, block_interface
+from hoh_cosim.kinds import KINDS, input_starts
 
 __all__ = [
     "build_fmu",
@@ -99,12 +102,20 @@ def _fingerprint(script: Path) -> str:
 
 def _build(kind: str, script: Path, out: Path) -> None:
     spec = KINDS[kind]
-    build_fmu(script, out, spec.block, spec.params, spec.description)
+    build_fmu(script, out, spec.block, spec.params, spec.description, input_starts(kind))
 
 
-def build_fmu(script: Path, out: Path, block: type, params: type, description: str) -> None:
+def build_fmu(
+    script: Path,
+    out: Path,
+    block: type,
+    params: type,
+    description: str,
+    starts: Mapping[str, Any] | None = None,
+) -> None:
     """Build the FMU of the entry script `script` (a `BlockSlave` subclass wrapping `block` with
-    `params`) with pythonfmu, finish its model description, and put it at `out` atomically."""
+    `params`, its inputs starting at `starts`, else 0) with pythonfmu, finish its model
+    description, and put it at `out` atomically, mode 0644."""
     from pythonfmu.builder import FmuBuilder
 
     kind = block.__name__
@@ -119,7 +130,7 @@ def build_fmu(script: Path, out: Path, block: type, params: type, description: s
                 f"building the {kind} FMU from {script} failed: {type(exc).__name__}: {exc}"
                 + (f" (pythonfmu said: {output})" if output else "")
             ) from None
-        specs = block_interface(block, params)
+        specs = block_interface(block, params, starts)
         finished = Path(tmp) / "finished.fmu"
         with (
             zipfile.ZipFile(built) as src,
@@ -128,14 +139,33 @@ def build_fmu(script: Path, out: Path, block: type, params: type, description: s
             for item in src.infolist():
                 data = src.read(item)
                 if item.filename == "modelDescription.xml":
-                    data = finish_model_description(data, specs, description)
+                    data = finish_model_description(
+                        data,
+                        specs,
+                        description,
+                        variable_step=variable_step(block),
+                        initial_from_parameters=hasattr(block, "initial_outputs"),
+                    )
+                # pythonfmu stores its entries uncompressed, some with mode 0600: deflate them,
+                # readable by all
+                item.compress_type = zipfile.ZIP_DEFLATED
+                item.external_attr = (0o100644 if not item.is_dir() else 0o40755) << 16
                 dst.writestr(item, data)
+            starts = {
+                str(vr): spec.start
+                for vr, spec in enumerate(specs)
+                if spec.causality == "input" and spec.start
+            }
+            entry = zipfile.ZipInfo(f"resources/{INPUT_STARTS}", (1980, 1, 1, 0, 0, 0))
+            entry.compress_type, entry.external_attr = zipfile.ZIP_DEFLATED, 0o100644 << 16
+            dst.writestr(entry, json.dumps(starts, indent=1))
         # a unique name beside the target, then one rename: a concurrent build or a reader never
         # sees half a file
         fd, part = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
         os.close(fd)
         try:
             shutil.copyfile(finished, part)
+            os.chmod(part, 0o644)  # mkstemp's file is 0600: the FMU is for every tool and user
             os.replace(part, out)
         except BaseException:
             Path(part).unlink(missing_ok=True)

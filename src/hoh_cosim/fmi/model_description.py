@@ -7,10 +7,14 @@ DefaultExperiment. We add:
 - the variables' descriptions;
 - Real start values written to round-trip exactly (pythonfmu writes 16 significant digits, one short
   of a double's 17);
-- ModelStructure: every output in Outputs and in InitialUnknowns, each with `dependencies=""`. Our
-  outputs change only in fmi2DoStep, from the inputs held over the step (no direct feedthrough), and
-  at initialisation they come from the parameters alone, so they depend on no input at the same
-  instant. Importers may then connect FMUs in loops without algebraic loops;
+- ModelStructure: every output in Outputs with `dependencies=""` and in InitialUnknowns. Our
+  outputs change only in fmi2DoStep, from the inputs held over the step (no direct feedthrough), so
+  they depend on no input at the same instant, and importers may connect FMUs in loops without
+  algebraic loops. At initialisation a block with `initial_outputs` computes them from its
+  parameters (every parameter is listed: a moved joint moves the initial pose), the others start
+  at zero whatever the parameters (`dependencies=""`);
+- the capability flags: canHandleVariableCommunicationStepSize as the block says
+  (`hoh_cosim.control.block`), canGetAndSetFMUstate and canSerializeFMUstate (`BlockSlave`);
 - a DefaultExperiment (0 to 10 s in 1 ms steps: the loop's tick).
 """
 
@@ -51,8 +55,16 @@ def _unit_element(name: str) -> ET.Element:
     return unit
 
 
-def finish_model_description(xml: bytes, specs: Sequence[VariableSpec], description: str) -> bytes:
-    """The completed model description for an FMU whose variables are `specs`."""
+def finish_model_description(
+    xml: bytes,
+    specs: Sequence[VariableSpec],
+    description: str,
+    *,
+    variable_step: bool = False,
+    initial_from_parameters: bool = False,
+) -> bytes:
+    """The completed model description for an FMU whose variables are `specs` (the flags: the
+    module's docstring)."""
     root = ET.fromstring(xml)
     root.set("description", description)
     by_name = {s.name: s for s in specs}
@@ -61,11 +73,14 @@ def finish_model_description(xml: bytes, specs: Sequence[VariableSpec], descript
         raise ValueError("modelDescription.xml has no ModelVariables")
     units: list[str] = []
     outputs: list[int] = []
+    parameters: list[int] = []
     for index, var in enumerate(variables.findall("ScalarVariable"), start=1):
         spec = by_name[var.get("name", "")]
         var.set("description", spec.description)
         if spec.causality == "output":
             outputs.append(index)
+        elif spec.causality == "parameter":
+            parameters.append(index)
         real = var.find("Real")
         if real is not None and spec.unit is not None:
             real.set("unit", spec.unit)
@@ -81,10 +96,16 @@ def finish_model_description(xml: bytes, specs: Sequence[VariableSpec], descript
     for name in sorted(units):
         unit_definitions.append(_unit_element(name))
     structure = ET.Element("ModelStructure")
-    for tag in ("Outputs", "InitialUnknowns"):
+    initial = " ".join(map(str, parameters)) if initial_from_parameters else ""
+    for tag, dependencies in (("Outputs", ""), ("InitialUnknowns", initial)):
         node = ET.SubElement(structure, tag)
         for index in outputs:
-            ET.SubElement(node, "Unknown", {"index": str(index), "dependencies": ""})
+            ET.SubElement(node, "Unknown", {"index": str(index), "dependencies": dependencies})
+    cosimulation = root.find("CoSimulation")
+    if cosimulation is not None:
+        cosimulation.set("canHandleVariableCommunicationStepSize", str(variable_step).lower())
+        cosimulation.set("canGetAndSetFMUstate", "true")
+        cosimulation.set("canSerializeFMUstate", "true")
     new = {
         "ModelStructure": structure,
         "DefaultExperiment": ET.Element("DefaultExperiment", DEFAULT_EXPERIMENT),

@@ -27,20 +27,35 @@ Python loop.
 from __future__ import annotations
 
 import ctypes
+import importlib
+import io
+import json
 import math
+import pickle
+import types
+from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar, Literal
+from urllib.parse import unquote, urlparse
 
 import numpy as np
 from pythonfmu import Fmi2Slave as _PythonFmuSlave
 from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from hoh_cosim.control.block import make_block, port_element_names, takes_rng
+from hoh_cosim.control.block import make_block, port_element_names, takes_rng, variable_step
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import leaves, with_values
 
-__all__ = ["BlockSlave", "VariableSpec", "block_interface", "pin_namespace", "port_element_names"]
+__all__ = [
+    "INPUT_STARTS",
+    "BlockSlave",
+    "VariableSpec",
+    "block_interface",
+    "pin_namespace",
+    "port_element_names",
+]
 
 VarType = Literal["Real", "Integer", "Boolean", "String"]
 _KIND_TO_TYPE: dict[str, VarType] = {
@@ -64,19 +79,26 @@ class VariableSpec:
     description: str
 
 
-def block_interface(block_cls: type, params_cls: type) -> list[VariableSpec]:
-    """Every FMI variable of the FMU wrapping `block_cls`, in value-reference order."""
+def block_interface(
+    block_cls: type, params_cls: type, starts: Mapping[str, Any] | None = None
+) -> list[VariableSpec]:
+    """Every FMI variable of the FMU wrapping `block_cls`, in value-reference order; `starts`
+    gives input ports' start values (`hoh_cosim.kinds.input_starts`), the others start at 0."""
     specs: list[VariableSpec] = []
+    starts = starts or {}
     for causality, ports in (("input", block_cls.inputs), ("output", block_cls.outputs)):
         for port in ports:
-            for element, unit in zip(port.element_names, port.units, strict=True):
+            values = np.zeros(port.size)
+            if causality == "input" and port.name in starts:
+                values = np.asarray(starts[port.name], dtype=float).reshape(port.size)
+            for element, unit, value in zip(port.element_names, port.units, values, strict=True):
                 specs.append(
                     VariableSpec(
                         element,
                         "Real",
                         causality,
                         "continuous",
-                        0.0 if causality == "input" else None,
+                        float(value) if causality == "input" else None,
                         unit,
                         port.description,
                     )
@@ -145,6 +167,9 @@ class BlockSlave(_PythonFmuSlave):
         self._n_io = self._n_in + sum(p.size for p in cls.block.outputs)
         reals = [s for s in self.specs if s.type == "Real"]
         self._reals = np.array([0.0 if s.start is None else s.start for s in reals], dtype=float)
+        for vr, start in _declared_input_starts(self.resources).items():
+            if vr < self._n_in:  # as the model description says: an FMU run alone starts there
+                self._reals[vr] = start
         self._others: dict[int, Any] = {}
         for vr, spec in enumerate(self.specs):
             var = _VARIABLE_CLASS[spec.type](
@@ -178,6 +203,8 @@ class BlockSlave(_PythonFmuSlave):
         self._instance: Any = None
         self._changed: set[int] = set()  # parameters set since the block was built
         self._failure: str | None = None  # the first error, if any (see _fail)
+        self._variable_step = variable_step(cls.block)
+        self._step: float | None = None  # a sampled block's period: its first step
 
     # --- errors ------------------------------------------------------------------------------
     #
@@ -273,6 +300,19 @@ class BlockSlave(_PythonFmuSlave):
         if self._failure is not None:  # a failed block is not stepped again
             self.log(f"not stepped after an earlier error: {self._failure}", Fmi2Status.error)
             return False
+        if not self._variable_step:
+            if self._step is None:
+                self._step = step_size
+            elif abs(step_size - self._step) > 1e-9 * self._step:
+                self._fail(
+                    f"fmi2DoStep at t = {current_time:.6g} s",
+                    ValueError(
+                        f"{type(self).__name__} is a sampled block: its sample period is its first "
+                        f"step, {self._step:g} s, and canHandleVariableCommunicationStepSize is "
+                        f"false; got a step of {step_size:g} s"
+                    ),
+                )
+                return False
         try:
             if self._changed:
                 fixed = [self.specs[vr].name for vr in self._changed if vr not in self._tunable]
@@ -287,6 +327,84 @@ class BlockSlave(_PythonFmuSlave):
             self._fail(f"fmi2DoStep at t = {current_time:.6g} s", exc)
             return False
         return True
+
+    # --- FMU state (fmi2GetFMUstate, fmi2SetFMUstate, fmi2SerializeFMUstate, ...) ------------
+
+    def _get_fmu_state(self) -> bytes:
+        try:
+            return _snapshot(self)
+        except Exception as exc:
+            self._fail("fmi2GetFMUstate", exc)
+            return _State()
+
+    def _set_fmu_state(self, state: bytes) -> None:
+        try:
+            _restore(self, state)
+        except Exception as exc:
+            self._fail("fmi2SetFMUstate", exc)
+
+    @staticmethod
+    def _fmu_state_to_bytes(state: bytes) -> bytes:
+        return bytes(state)
+
+    @staticmethod
+    def _fmu_state_from_bytes(data: bytes) -> bytes:
+        return _State(data)
+
+
+class _State(bytes):
+    """An FMU state: the instance's values and its block, pickled (so a snapshot, never a live
+    object, and its own serialised form). Only for this process or another of the same build:
+    unpickling runs code, as loading the FMU itself does."""
+
+
+class _Pickler(pickle.Pickler):
+    """A block may hold a module (its library, e.g. pinocchio): pickled by name."""
+
+    def persistent_id(self, obj: Any) -> str | None:
+        return obj.__name__ if isinstance(obj, types.ModuleType) else None
+
+
+class _Unpickler(pickle.Unpickler):
+    def persistent_load(self, pid: str) -> Any:
+        return importlib.import_module(pid)
+
+
+def _snapshot(slave: BlockSlave) -> _State:
+    values = (slave._reals, slave._others, slave._instance)
+    flags = (slave._changed, slave._failure, slave._step)
+    buffer = io.BytesIO()
+    _Pickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump((values, flags))
+    return _State(buffer.getvalue())
+
+
+def _restore(slave: BlockSlave, state: bytes) -> None:
+    (reals, others, instance), (changed, failure, step) = _Unpickler(io.BytesIO(state)).load()
+    if reals.shape != slave._reals.shape:
+        raise ValueError(f"a state of {reals.size} reals for an FMU of {slave._reals.size}")
+    slave._reals[:] = reals  # in place: the input views stay valid
+    slave._others = others
+    slave._instance, slave._changed, slave._failure, slave._step = instance, changed, failure, step
+
+
+INPUT_STARTS = "input_starts.json"
+"""The file in an FMU's resources/ with its inputs' start values, as its model description gives
+them: {value reference: start} for those that are not 0 (hosts need not extract the model
+description beside the resources, fmpy's simulate_fmu does not)."""
+
+
+def _declared_input_starts(resources: str | None) -> dict[int, float]:
+    """The inputs' start values that the build wrote (`INPUT_STARTS`), by value reference, so a
+    master that sets no input runs the block from them. Nothing found: {} (the inputs start at 0)."""
+    if not resources:
+        return {}
+    location = urlparse(resources)
+    folder = Path(unquote(location.path) if location.scheme == "file" else resources)
+    try:
+        data = json.loads((folder / INPUT_STARTS).read_text())
+    except (OSError, ValueError):
+        return {}
+    return {int(vr): float(value) for vr, value in data.items()}
 
 
 def pin_namespace(namespace: dict[str, Any]) -> None:
