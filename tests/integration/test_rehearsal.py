@@ -29,6 +29,7 @@ from hoh_cosim.hardware.session_log import Session, SessionLog, read_session
 from hoh_cosim.rehearsal.rehearse import rehearsal_config, truth_calibration
 from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
 from plant_models.sensors import FT150Params
+from tests.mcap_schemas import invalid_messages
 from tests.xdist_groups import REAL_TIME
 
 pytestmark = REAL_TIME
@@ -174,6 +175,11 @@ def test_a_fault_stops_the_robot_with_a_message_and_a_complete_log(tmp_path, fau
     assert_stopped_and_logged(outcome, cause)
     t_end = outcome.log.messages["/command"][-1]["t"]
     assert t_end < 8.0  # it ended on the fault, not on time
+    # a foreign reader's view: every message strict JSON and valid against its channel's schema,
+    # the fault's NaN and the stalled or unplugged stream's last values included
+    count, problems = invalid_messages(outcome.log.path)
+    assert count > 0
+    assert problems == [], problems[:5]
     if fault == "probe_unplug":
         assert "connection lost" in outcome.result.cause
 

@@ -28,11 +28,15 @@ from hoh_cosim.errors import InputFileError, RunError
 from hoh_cosim.hardware.session_log import (
     CHANNELS,
     CYCLE_LAYOUT,
+    NONFINITE,
     CycleRow,
     Session,
     SessionLog,
+    channel_schema,
+    decode_message,
     read_session,
 )
+from tests.mcap_schemas import invalid_messages
 
 ROWS = 40
 DT = 0.002
@@ -106,7 +110,8 @@ def row_values(i: int) -> dict[str, Any]:
 
 
 def expected_messages(i: int) -> dict[str, dict[str, Any]]:
-    """Row i as the messages of its channels: NaN as null, /ft150 and /fse103 only when present."""
+    """Row i as `read_session` gives its messages back: NaN as NaN, /ft150 and /fse103 only when
+    present (compare them with `same`: NaN is not equal to itself)."""
     values = row_values(i)
     out: dict[str, dict[str, Any]] = {}
     for topic, name, _, _ in CYCLE_LAYOUT:
@@ -115,13 +120,22 @@ def expected_messages(i: int) -> dict[str, dict[str, Any]]:
         message = out.setdefault(topic, {"k": i, "t": i * DT})
         value = values[f"{topic}.{name}"]
         if isinstance(value, np.ndarray):
-            message[name] = [None if np.isnan(x) else float(x) for x in value]
-        elif isinstance(value, int):  # booleans too
+            message[name] = [float(x) for x in value]
+        else:  # integers and booleans too
             message[name] = value
-        else:
-            message[name] = None if np.isnan(value) else value
     out["/command"]["status_text"] = STATUSES[i % len(STATUSES)][1]
     return out
+
+
+def same(a: Any, b: Any) -> bool:
+    """Equal, NaN counting as equal to NaN, an int never equal to a float (types matter in JSON)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, float) and isinstance(b, float) and np.isnan(a) and np.isnan(b):
+        return True
+    return type(a) is type(b) and a == b
 
 
 EVENTS = [
@@ -220,7 +234,7 @@ def test_every_row_comes_back_with_exact_values(session):
             for t, message in expected_messages(i).items()
             if t == topic
         ]
-        assert session.messages[topic] == expected, topic
+        assert same(session.messages[topic], expected), topic
 
 
 def test_every_cycle_channel_has_a_message_per_row_with_k_and_t(session):
@@ -237,21 +251,28 @@ def test_sensor_channels_only_for_rows_that_have_a_sample(session):
     assert 0 < len(session.messages["/fse103"]) < ROWS
 
 
-def test_nan_is_null_in_messages_and_nan_in_series(session):
+def test_a_non_finite_value_is_text_in_the_file_and_nan_when_read(session, written):
     ft_rows = [i for i in range(ROWS) if has_ft(i)]
     wrench = session.series("/ft150", "wrench_S")
     assert wrench.shape == (len(ft_rows), 6)
     expected = np.array([row_values(i)["/ft150.wrench_S"] for i in ft_rows])
     np.testing.assert_array_equal(wrench, expected)  # NaN where NaN, exact elsewhere
     assert np.count_nonzero(np.isnan(wrench)) == 1
-    assert session.messages["/ft150"][ft_rows.index(5)]["wrench_S"][1] is None
-
-    assert session.messages["/estimate"][6]["F_hand_B"][2] is None
-    assert session.messages["/estimate"][9]["ft_age"] is None
+    assert np.isnan(session.messages["/ft150"][ft_rows.index(5)]["wrench_S"][1])
+    assert np.isnan(session.messages["/estimate"][6]["F_hand_B"][2])
+    assert np.isnan(session.messages["/estimate"][9]["ft_age"])
     ages = session.series("/estimate", "ft_age")
     assert ages.shape == (ROWS,)
     assert np.isnan(ages[9])
     assert np.count_nonzero(np.isnan(ages)) == 1
+    # in the file: the field left out, its values as text in `nonfinite`, every other one a number
+    raw = {(m["k"], topic): m for topic, m in _raw_messages(written)}
+    ft = raw[(5, "/ft150")]
+    assert "wrench_S" not in ft
+    assert ft[NONFINITE]["wrench_S"][1] == "nan"
+    assert float(ft[NONFINITE]["wrench_S"][0]) == row_values(5)["/ft150.wrench_S"][0]
+    assert raw[(9, "/estimate")][NONFINITE] == {"ft_age": "nan"}
+    assert NONFINITE not in raw[(8, "/estimate")]
     np.testing.assert_array_equal(
         session.series("/command", "sent_B")[13],
         row_values(13)["/command.sent_B"],
@@ -269,9 +290,38 @@ def test_series_of_integers_and_booleans(session):
     assert session.series("/nothing", "x").shape == (0,)
 
 
+def test_every_message_is_valid_against_its_channels_schema(written):
+    count, problems = invalid_messages(written)
+    assert count > 4 * ROWS
+    assert problems == []
+
+
+def test_the_schemas_refuse_what_they_should():
+    from jsonschema import Draft202012Validator
+
+    robot = Draft202012Validator(channel_schema("/robot"))
+    good = {"k": 1, "t": 0.002, "p_BT_B": [0.1, 0.2, 0.3], "R_BT": [1.0] * 9,
+            "twist_B": [0.0] * 6, "robot_mode": 7, "safety_mode": 1, "protective_stop": False,
+            "emergency_stop": False, "program_running": True}  # fmt: skip
+    assert robot.is_valid(good)
+    assert not robot.is_valid({**good, "extra": 1})  # no key the schema does not name
+    assert not robot.is_valid({k: v for k, v in good.items() if k != "robot_mode"})  # required
+    assert not robot.is_valid({**good, "p_BT_B": [0.1, None, 0.3]})  # null is not a number
+    assert not robot.is_valid({**good, "p_BT_B": [0.1, 0.2]})  # the vector's length
+    nonfinite = {k: v for k, v in good.items() if k != "p_BT_B"}
+    assert robot.is_valid({**nonfinite, NONFINITE: {"p_BT_B": ["0.1", "nan", "0.3"]}})
+
+
+def _raw_messages(path) -> list[tuple[str, dict[str, Any]]]:
+    from mcap.reader import make_reader
+
+    with path.open("rb") as stream:
+        return [(c.topic, json.loads(m.data)) for _, c, m in make_reader(stream).iter_messages()]
+
+
 def test_json_types_follow_the_schema(session):
-    """Integers as integers, booleans as true/false, numbers and vectors as floats or null (the
-    equality checks alone would take 1 for true and 1 for 1.0)."""
+    """Integers as integers, booleans as true/false, numbers and vectors as floats (NaN read back
+    from `nonfinite`; the equality checks alone would take 1 for true and 1 for 1.0)."""
     for topic in CYCLE_TOPICS:
         for message in session.messages[topic]:
             assert type(message["k"]) is int
@@ -281,9 +331,9 @@ def test_json_types_follow_the_schema(session):
                     continue
                 kind = CHANNELS[topic][name]["type"]
                 if kind == "array":
-                    assert all(x is None or type(x) is float for x in value), (topic, name)
+                    assert all(type(x) is float for x in value), (topic, name)
                 elif kind == "number":
-                    assert value is None or type(value) is float, (topic, name)
+                    assert type(value) is float, (topic, name)
                 else:
                     expected = {"integer": int, "boolean": bool, "string": str}[kind]
                     assert type(value) is expected, (topic, name, value)
@@ -327,16 +377,18 @@ def test_the_mcap_packages_own_reader_reads_the_same_messages(written, session):
         assert schema.encoding == "jsonschema"
         assert channel.message_encoding == "json"
         data = json.loads(message.data)
-        # the schema describes exactly the message's fields
-        assert set(data) == set(json.loads(schema.data)["properties"]), channel.topic
-        by_topic.setdefault(channel.topic, []).append(data)
+        # the schema names every field of the message and requires the ones always there
+        document = json.loads(schema.data)
+        assert set(data) <= set(document["properties"]), channel.topic
+        assert set(document["required"]) <= set(data), channel.topic
+        by_topic.setdefault(channel.topic, []).append(decode_message(data))
         if channel.topic == "/robot":
             if first_log_time is None:
                 first_log_time = message.log_time
             # log times run with the session time t of each cycle
             assert message.log_time - first_log_time == int(data["t"] * 1e9)
             assert message.publish_time == message.log_time
-    assert {t: m for t, m in by_topic.items()} == {t: m for t, m in session.messages.items() if m}
+    assert same(by_topic, {t: m for t, m in session.messages.items() if m})
 
 
 # --- a log cut off --------------------------------------------------------------------------------

@@ -1,7 +1,8 @@
 """The session log: every cycle's raw readings, estimates, commands and statuses, as MCAP.
 
-Channels carry JSON messages with a JSON schema each, so the file opens in Foxglove and in the `mcap`
-Python package alike:
+Channels carry JSON messages with a JSON schema each (`channel_schema`: every field named, the
+ones always present required, nothing else allowed; a non-finite value as text under `NONFINITE`),
+so the file opens in Foxglove and in the `mcap` Python package alike:
 
     /robot      p_BT_B, R_BT (row by row), twist_B, robot and safety mode, stops, program running
     /ft150      the latest raw wrench in S, how many samples so far, its receipt time
@@ -50,10 +51,13 @@ if TYPE_CHECKING:  # the writer process imports this module: it needs none of th
 __all__ = [
     "CHANNELS",
     "CYCLE_LAYOUT",
+    "NONFINITE",
     "CycleRecord",
     "CycleRow",
     "Session",
     "SessionLog",
+    "channel_schema",
+    "decode_message",
     "read_session",
 ]
 
@@ -104,11 +108,21 @@ CYCLE_LAYOUT: tuple[tuple[str, str, int, dict[str, Any]], ...] = (
 _HEAD = 4
 ROW_SIZE = _HEAD + sum(size for _, _, size, _ in CYCLE_LAYOUT)
 
+# every field of every channel: its JSON schema (a vector with its length)
 CHANNELS: dict[str, dict[str, Any]] = {}
 for _topic, _name, _size, _kind in CYCLE_LAYOUT:
-    CHANNELS.setdefault(_topic, {})[_name] = _kind
+    _field = {**_kind, "minItems": _size, "maxItems": _size} if _kind is _VECTOR else _kind
+    CHANNELS.setdefault(_topic, {})[_name] = _field
 CHANNELS["/command"]["status_text"] = _STR
 CHANNELS["/events"] = {"event": _STR, "detail": _STR}
+
+NONFINITE = "nonfinite"
+"""The field of a message that holds its non-finite numbers. JSON has no NaN, a schema that allows
+null in a number field (`"type": ["number", "null"]`) makes Foxglove reject the whole channel, and
+a null where the schema says number is invalid. So a field with a non-finite value (a sensor's NaN)
+is left out and given here instead, as text, element by element: `"nonfinite": {"wrench_S": ["nan",
+"1.5", "2.0", "0.1", "0.0", "0.0"]}`. `read_session` puts it back as NaN; a reader that does not
+know the field sees the value missing (a gap in a plot), never a wrong number."""
 
 
 class CycleRow:
@@ -174,13 +188,47 @@ class CycleRecord:
         row.set("/timing.late_s", self.late_s)
 
 
-def _schema(topic: str, properties: Mapping[str, Any]) -> bytes:
-    schema = {
+def _is_float(kind: Mapping[str, Any]) -> bool:
+    """Whether a field holds floats, which may be non-finite (then in `NONFINITE`)."""
+    return kind["type"] == "number" or (kind["type"] == "array" and kind["items"] == _NUM)
+
+
+def channel_schema(topic: str) -> dict[str, Any]:
+    """The JSON schema of a channel's messages: every field named, nothing else allowed; the
+    fields that hold floats may be absent only when `NONFINITE` gives them."""
+    properties = {"k": _INT, "t": _NUM, **CHANNELS[topic]}
+    floats = {
+        name: (
+            {
+                "type": "array",
+                "items": _STR,
+                "minItems": kind["minItems"],
+                "maxItems": kind["maxItems"],
+            }
+            if kind["type"] == "array"
+            else _STR
+        )
+        for name, kind in CHANNELS[topic].items()
+        if _is_float(kind)
+    }
+    schema: dict[str, Any] = {
         "title": f"hoh-cosim {topic}",
         "type": "object",
-        "properties": {"k": _INT, "t": _NUM, **properties},
+        "properties": properties,
+        "required": ["k", "t", *(n for n, kind in CHANNELS[topic].items() if not _is_float(kind))],
+        "additionalProperties": False,
     }
-    return json.dumps(schema).encode()
+    if floats:
+        schema["properties"][NONFINITE] = {
+            "type": "object",
+            "properties": floats,
+            "additionalProperties": False,
+        }
+    return schema
+
+
+def _text(x: float) -> str:
+    return repr(float(x)) if np.isfinite(x) else str(float(x))  # 'nan', 'inf', '-inf'
 
 
 def _number(x: float, kind: dict[str, Any]) -> Any:
@@ -188,7 +236,7 @@ def _number(x: float, kind: dict[str, Any]) -> Any:
         return int(x)
     if kind is _BOOL:
         return bool(x)
-    return float(x) if np.isfinite(x) else None
+    return float(x)
 
 
 def _messages(row: np.ndarray) -> list[tuple[str, dict[str, Any]]]:
@@ -202,8 +250,11 @@ def _messages(row: np.ndarray) -> list[tuple[str, dict[str, Any]]]:
         if (topic == "/ft150" and not has_ft) or (topic == "/fse103" and not has_probe):
             continue
         message = out.setdefault(topic, {"k": k, "t": t})
-        if kind is _VECTOR:
-            message[name] = [float(x) if np.isfinite(x) else None for x in values]
+        if (kind is _VECTOR or kind is _NUM) and not np.all(np.isfinite(values)):
+            text = [_text(x) for x in values]
+            message.setdefault(NONFINITE, {})[name] = text if kind is _VECTOR else text[0]
+        elif kind is _VECTOR:
+            message[name] = values.tolist()
         else:
             message[name] = _number(values[0], kind)
     if "/command" in out:
@@ -260,11 +311,11 @@ def _writer_main(
         writer = Writer(stream)
         writer.start(profile="", library=f"hoh-cosim {__version__}")
         channels = {}
-        for topic, properties in CHANNELS.items():
+        for topic in CHANNELS:
             schema = writer.register_schema(
                 name=f"hoh_cosim{topic.replace('/', '.')}",
                 encoding="jsonschema",
-                data=_schema(topic, properties),
+                data=json.dumps(channel_schema(topic)).encode(),
             )
             channels[topic] = writer.register_channel(
                 topic=topic, message_encoding="json", schema_id=schema
@@ -274,7 +325,8 @@ def _writer_main(
 
         def add(topic: str, t: float, message: dict[str, Any]) -> None:
             log_ns = t0_unix_ns + int(t * 1e9)
-            writer.add_message(channels[topic], log_ns, json.dumps(message).encode(), log_ns)
+            data = json.dumps(message, allow_nan=False).encode()  # strict JSON, as browsers read
+            writer.add_message(channels[topic], log_ns, data, log_ns)
 
         def drain_events() -> None:
             while True:
@@ -418,12 +470,22 @@ class Session:
     complete: bool = True
 
     def series(self, topic: str, name: str) -> np.ndarray:
-        """One field of one topic as an array (rows in message order; None as NaN)."""
+        """One field of one topic as an array (rows in message order; None, which older logs
+        wrote for a non-finite value, as NaN)."""
         rows = [m[name] for m in self.messages.get(topic, [])]
         return np.array(
             [[np.nan if x is None else x for x in r] if isinstance(r, list) else r for r in rows],
             dtype=float,
         )
+
+
+def decode_message(message: dict[str, Any]) -> dict[str, Any]:
+    """A message as written, its `NONFINITE` values back in their fields as floats (NaN, inf)."""
+    given = message.pop(NONFINITE, None)
+    if isinstance(given, Mapping):
+        for name, text in given.items():
+            message[name] = [float(x) for x in text] if isinstance(text, list) else float(text)
+    return message
 
 
 def read_session(path: str | Path) -> Session:
@@ -448,7 +510,8 @@ def read_session(path: str | Path) -> Session:
                 elif isinstance(record, Message):
                     topic = topics.get(record.channel_id)
                     if topic is not None:
-                        session.messages.setdefault(topic, []).append(json.loads(record.data))
+                        message = decode_message(json.loads(record.data))
+                        session.messages.setdefault(topic, []).append(message)
                 elif isinstance(record, Metadata) and record.name == "session":
                     session.metadata = {k: json.loads(v) for k, v in record.metadata.items()}
                 elif isinstance(record, Footer):
