@@ -34,6 +34,7 @@ from hoh_cosim.rehearsal import rtde_protocol as rtde
 from hoh_cosim.rehearsal.rehearse import truth_calibration
 from hoh_cosim.rehearsal.ur_controller import UrController, wait_for
 from hoh_cosim.rehearsal.world import RehearsalWorld, WorldSetup
+from tests.rtde_guide_client import GuideClient
 from tests.xdist_groups import REAL_TIME
 
 pytestmark = REAL_TIME
@@ -112,6 +113,12 @@ def finished(process: subprocess.Popen, log: Path, timeout_s: float) -> str:
     return Path(f"{log}.out").read_text()
 
 
+def emulator_events(ur: UrController) -> str:
+    """What the emulated controller did, for a failure's message."""
+    ur.said("")  # collects the events
+    return "\nemulator:\n" + "\n".join(text for _, text in ur.events[-40:])
+
+
 def arm_speed(world: RehearsalWorld) -> float:
     return float(np.linalg.norm(world._state.read()[12:15]))
 
@@ -138,7 +145,7 @@ def test_hw_run_guides_the_emulated_robot_through_ur_rtde(rig, tmp_path):
     log = tmp_path / "session.mcap"
     process = hw_run(config, log, "--seconds", "9")
     output = finished(process, log, 120)
-    assert process.returncode == 0, output
+    assert process.returncode == 0, output + emulator_events(ur)
     session = read_session(log)
     assert session.complete
     # ur_rtde talked to the controller as to a robot: program uploaded, watchdog set, speedL
@@ -242,8 +249,7 @@ def test_an_injected_fault_stops_the_runner_and_names_the_cause(rig, tmp_path, f
         ur.inject(fault)
     finally:
         output = finished(process, log, 30)
-    ur.said("")  # collect the emulator's events, for the message
-    assert cause in output, output + "\nemulator:\n" + "\n".join(text for _, text in ur.events)
+    assert cause in output, output + emulator_events(ur)
     if fault == "drop_connection":
         # the runner stops and says why; then ur_rtde 1.6.5's own reconnecting thread may abort
         # the process on its way out ("terminate called ... read: End of file", SIGABRT)
@@ -295,7 +301,7 @@ class RawRtde:
         self.sock.sendall(rtde.pack(kind, payload))
         while True:
             package = rtde.read_package(self.sock)
-            if package.kind != "U":
+            if package.kind not in ("U", "M"):  # the answer, past data and text messages
                 return package
 
     def close(self) -> None:
@@ -309,7 +315,7 @@ def test_the_emulator_refuses_what_a_controller_refuses():
     ):
         a, b = RawRtde(ur.host), RawRtde(ur.host)
         try:
-            assert a.ask("V", struct.pack(">H", 3)).payload == b"\x00"  # only protocol 2
+            assert a.ask("V", struct.pack(">H", 3)).payload == b"\x00"  # only protocols 1, 2
             assert a.ask("V", struct.pack(">H", 2)).payload == b"\x01"
             reply = a.ask("O", struct.pack(">d", 125.0) + b"timestamp,warp_factor")
             assert reply.payload[0] == 0
@@ -389,3 +395,242 @@ def test_hw_rehearse_through_the_emulated_controller(tmp_path, capsys):
     session = read_session(log)
     assert session.complete
     assert np.ptp(session.series("/robot", "p_BT_B")[:, 0]) > 0.005  # the hand moved the arm
+
+
+# --- hw emulate: the devices alone, for clients we did not write ----------------------------------
+
+
+def _started(process: subprocess.Popen, timeout_s: float = 60.0) -> dict[str, str]:
+    """The lines `hw emulate` prints until "ready": where each device is."""
+    seen: dict[str, str] = {}
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        line = process.stdout.readline()
+        if not line:
+            raise AssertionError(f"hw emulate ended before it was ready: {seen}")
+        if line.startswith("ready"):
+            return seen
+        key, _, rest = line.partition(" on ")
+        seen[key.strip()] = rest.strip()
+    raise AssertionError(f"hw emulate not ready within {timeout_s} s: {seen}")
+
+
+def test_hw_emulate_serves_a_dashboard_client_ur_rtde_and_raw_sensor_readers(tmp_path):
+    from universal_robots_clients.dashboard_client import send_command
+
+    host = next_host()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hoh_cosim", "hw", "emulate", "--host", host, "--ft-port", "0",
+         "--seconds", "120"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )  # fmt: skip
+    try:
+        where = _started(process)
+        assert where["UR controller"].startswith(f"{host} (e-series, 500 Hz)"), where
+        ft_host, ft_port = where["FT-150 stream"].rsplit(":", 1)
+        assert ft_host == host
+
+        # the dashboard, as a lab script drives it (universal-robots-clients: one connection per
+        # command, the greeting read and dropped, the reply line returned as it is)
+        dialogue = [
+            ("get robot model", "UR5"),
+            ("get loaded program", "No program loaded"),
+            ("load nothing.txt", "File not found: nothing.txt"),
+            ("load /programs/scan.urp", "Loading program: /programs/scan.urp"),
+            ("get loaded program", "Loaded program: /programs/scan.urp"),
+            ("isProgramSaved", "true /programs/scan.urp"),
+            ("get operational mode", "NONE"),
+            ("power off", "Powering off"),
+            ("robotmode", "Robotmode: POWER_OFF"),
+            ("play", "Failed to execute: play"),
+            ("power on", "Powering on"),
+            ("robotmode", "Robotmode: IDLE"),
+            ("brake release", "Brake releasing"),
+            ("robotmode", "Robotmode: RUNNING"),
+            ("play", "Starting program"),
+            ("programState", "PLAYING /programs/scan.urp"),
+            ("running", "Program running: true"),
+            ("pause", "Pausing program"),
+            ("programState", "PAUSED /programs/scan.urp"),
+            ("stop", "Stopped"),
+            ("programState", "STOPPED /programs/scan.urp"),
+            ("pause", "Failed to execute: pause"),
+        ]
+        replies = [(command, send_command(host, command)) for command, _ in dialogue]
+        assert replies == dialogue
+        assert send_command(host, "clear operational mode").startswith(
+            "No longer controlling the operational mode. Current operational mode: "
+        )
+
+        # RTDE through ur-rtde's receive interface: the arm's pose and the controller's clock
+        # ur-rtde asks for every output it knows unless told: the emulator refuses the ones it
+        # does not model (joint currents ...), so a client names what it reads
+        receive = rtde_receive.RTDEReceiveInterface(host, 500.0, ["timestamp", "actual_TCP_pose"])
+        try:
+            first = receive.getTimestamp()
+            time.sleep(0.3)
+            assert receive.getTimestamp() > first
+            assert len(receive.getActualTCPPose()) == 6
+        finally:
+            receive.disconnect()
+
+        # the FT-150 stream's bytes and the FSE103's frames, as any reader gets them
+        with socket.create_connection((host, int(ft_port)), timeout=5.0) as ft:
+            received = b""
+            deadline = time.monotonic() + 2.0
+            while len(received) < 500 and time.monotonic() < deadline:
+                received += ft.recv(4096)
+        assert len(received) >= 500
+        fd = os.open(where["FSE103"], os.O_RDONLY | os.O_NOCTTY)
+        try:
+            assert len(os.read(fd, 64)) > 0
+        finally:
+            os.close(fd)
+    finally:
+        process.send_signal(signal.SIGINT)
+        output = process.communicate(timeout=30)[0]
+    assert process.returncode == 130, output  # Ctrl-C: "interrupted", as everywhere
+    assert "interrupted" in output, output
+
+
+def test_hw_emulate_refuses_a_host_off_loopback_unless_allowed():
+    done = subprocess.run(
+        [sys.executable, "-m", "hoh_cosim", "hw", "emulate", "--host", "192.0.2.1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1
+    assert "192.0.2.1 is not a loopback address" in lines[0]
+    assert "--allow-remote" in lines[0]
+
+
+# --- RTDE as UR's guide describes it, through a client written from the guide ------------------
+
+
+@pytest.fixture
+def still_rig():
+    """A world whose hand pushes the handle with 5 N along x from the start, behind an e-series."""
+    setup = WorldSetup(robot_rate_hz=500.0, task="push_release", task_start_s=0.0)
+    with RehearsalWorld(setup) as world, UrController(world, next_host()) as ur:
+        yield world, ur
+
+
+def test_protocol_1_outputs_come_without_a_recipe_id_at_the_controller_rate(still_rig):
+    _, ur = still_rig
+    with GuideClient(ur.host) as client:
+        assert client.request_version(1)
+        recipe, types = client.setup_outputs(["timestamp", "actual_q"])
+        assert recipe is None  # version 1: the types only
+        assert types == ["DOUBLE", "VECTOR6D"]
+        assert client.start()
+        stamps = [client.outputs()[0] for _ in range(200)]
+    rate = (len(stamps) - 1) / (stamps[-1] - stamps[0])
+    assert 400 < rate < 600  # every 2 ms cycle of the world's clock (500 Hz)
+
+
+@pytest.mark.parametrize(("asked_hz", "every"), [(100.0, 5), (200.0, 2), (300.0, 1), (125.0, 4)])
+def test_protocol_2_streams_every_floor_of_rate_over_frequency_cycles(still_rig, asked_hz, every):
+    _, ur = still_rig
+    with GuideClient(ur.host) as client:
+        assert client.request_version(2)
+        recipe, _ = client.setup_outputs(["timestamp"], asked_hz)
+        assert recipe == 1
+        assert client.start()
+        stamps = [client.outputs()[0] for _ in range(60)]
+    steps = np.round(np.diff(stamps) / 0.002).astype(int)
+    # the controller's clock between packages: `every` cycles (a late world may skip one)
+    assert Counter(steps.tolist()).most_common(1)[0][0] == every
+
+
+@pytest.mark.parametrize("asked_hz", [0.0, -5.0, 600.0])
+def test_an_output_frequency_out_of_range_is_refused_at_set_up_with_a_reason(still_rig, asked_hz):
+    _, ur = still_rig
+    with GuideClient(ur.host) as client:
+        assert client.request_version(2)
+        recipe, _ = client.setup_outputs(["timestamp"], asked_hz)
+        assert recipe == 0
+        assert any("outside 0 < f <= 500 Hz" in m[0] for m in client.messages), client.messages
+        assert not client.start()
+
+
+def test_an_output_the_emulator_does_not_model_is_not_found_never_a_silent_zero(still_rig):
+    _, ur = still_rig
+    with GuideClient(ur.host) as client:
+        assert client.request_version(2)
+        recipe, types = client.setup_outputs(["actual_qd", "actual_current", "timestamp"], 125.0)
+        assert recipe == 0
+        assert types == ["VECTOR6D", "NOT_FOUND", "DOUBLE"]
+        assert any("actual_current" in m[0] for m in client.messages)
+        assert not client.start()
+
+
+def test_the_tcp_force_is_the_hands_push_and_the_clock_is_the_worlds(still_rig):
+    world, ur = still_rig
+    with GuideClient(ur.host) as client:
+        assert client.request_version(2)
+        client.setup_outputs(["timestamp", "actual_TCP_force", "tcp_force_scalar", "actual_qd"])
+        assert client.start()
+        timestamp, wrench, scalar, qd = client.latest(0.5)
+        world_time = float(world._state.read()[23])
+    # the operator pushes 5 N along x at the handle (push_release): the TCP feels it
+    assert wrench[:3] == pytest.approx([5.0, 0.0, 0.0], abs=1e-6)
+    assert scalar == pytest.approx(5.0, abs=1e-6)
+    assert qd == pytest.approx([0.0] * 6, abs=1e-12)  # nothing commands the arm: it stands
+    assert abs(timestamp - world_time) < 0.1  # the world's clock, read a moment apart
+
+
+def test_a_clients_text_message_reaches_the_controllers_log(still_rig):
+    _, ur = still_rig
+    with GuideClient(ur.host) as client:
+        assert client.request_version(2)
+        client.text("calibration done", "lab script", 3)
+        client.request_version(2)  # a request after it: the message has been read by then
+    assert ur.said(r"^rtde message from lab script \(info\): calibration done$")
+
+
+def test_actual_qd_follows_the_arm_under_speedl(still_rig):
+    _, ur = still_rig
+    control = rtde_control.RTDEControlInterface(ur.host, 500.0)
+    try:
+        with GuideClient(ur.host) as client:
+            assert client.request_version(2)
+            client.setup_outputs(["actual_qd", "actual_TCP_speed"], 500.0)
+            assert client.start()
+            deadline = time.monotonic() + 1.0
+            while time.monotonic() < deadline:
+                control.speedL([0.02, 0.0, 0.0, 0.0, 0.0, 0.0], 0.5, 0.0)
+                time.sleep(0.01)
+            qd, speed = client.latest(0.05)
+    finally:
+        control.speedStop()
+        control.stopScript()
+        control.disconnect()
+    assert speed[0] == pytest.approx(0.02, abs=2e-3)
+    assert max(abs(x) for x in qd) > 0.005  # joints turn for a TCP at 2 cm/s
+
+
+def test_every_output_of_the_guide_is_emulated_a_register_or_refused():
+    """No output is a silent zero: each is in the emulator's state, a register (0 until written,
+    as on a controller), or refused at set-up (NOT_EMULATED)."""
+    import multiprocessing
+
+    from hoh_cosim.rehearsal import ur_controller, world
+
+    state_memory = multiprocessing.RawArray("d", 1 + world._STATE)
+    state_memory[4:13] = np.eye(3).reshape(9).tolist()  # R_BT: a rotation
+    shared = ur_controller._SharedWorld(
+        state_memory, multiprocessing.RawArray("d", 1 + world._COMMAND)
+    )
+    emulator = ur_controller._Emulator(
+        shared, host="127.0.0.1", ports={}, series="e", remote_control=True
+    )
+    state = emulator._state()
+    registers = {n for n in rtde.OUTPUTS if "register" in n}
+    silent = set(rtde.OUTPUTS) - set(state) - registers - ur_controller.NOT_EMULATED
+    assert silent == set()
+    assert not (set(state) & ur_controller.NOT_EMULATED)

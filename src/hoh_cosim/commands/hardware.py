@@ -4,6 +4,7 @@
     hoh-cosim hw calibrate CONFIG.yaml [--out FILE] [--samples N] [--tilts N] [--directions N]
     hoh-cosim hw sensors [--ft HOST[:PORT]] [--probe DEVICE] [--seconds S] [--json]
     hoh-cosim hw rehearse [--seconds S] [--task TASK] [--rate HZ] [--fault KIND@SECONDS ...]
+    hoh-cosim hw emulate [--host 127.0.0.1] [--series e|cb3] [--seconds N] [--allow-remote]
     hoh-cosim replay LOG.mcap [--set block.parameter=value ...] [--out DIR]
 
 Exit status as everywhere: 0 done, 2 the input is wrong, 1 the session ended on a fault.
@@ -222,6 +223,62 @@ def add_commands(sub: Any) -> None:
         help="SCHED_FIFO priority for the loop (Linux, needs the right)",
     )
 
+    emulate = hw_sub.add_parser(
+        "emulate",
+        help="the emulated UR controller, FT-150 and FSE103 alone, for other clients",
+        description="Start the rehearsal's emulated devices on their own: a UR controller "
+        "(dashboard 29999, script 30003, RTDE 30004) driving the simulated arm, the FT-150 stream "
+        "and the FSE103 on a pseudo-terminal, and print where they are, so that your own scripts, "
+        "ur-rtde, UR's RTDE client or a ROS driver can be pointed at them. Ends after --seconds "
+        "or on Ctrl-C.",
+    )
+    emulate.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="the address the controller and the FT-150 stream listen on (default: 127.0.0.1; "
+        "a non-loopback address needs --allow-remote)",
+    )
+    emulate.add_argument(
+        "--series",
+        choices=("e", "cb3"),
+        default="e",
+        help="the controller generation: e (e-series, 500 Hz) or cb3 (125 Hz) (default: e)",
+    )
+    emulate.add_argument(
+        "--seconds",
+        type=float,
+        default=None,
+        metavar="S",
+        help="stop after S seconds (default: run until Ctrl-C)",
+    )
+    emulate.add_argument(
+        "--ft-port",
+        type=int,
+        default=63351,
+        metavar="PORT",
+        help="the FT-150 stream's port (default: 63351, the URCap's; 0: any free port)",
+    )
+    emulate.add_argument(
+        "--task",
+        choices=TASKS,
+        default="off",
+        help="what the emulated operator's hand does from --task-start (default: off, nobody "
+        "touches the handle)",
+    )
+    emulate.add_argument(
+        "--task-start",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="when the hand takes the handle, in seconds of the world's clock (default: 5)",
+    )
+    emulate.add_argument(
+        "--allow-remote",
+        action="store_true",
+        help="listen on a non-loopback --host: anyone on that network can then move the "
+        "emulated arm (never a real one)",
+    )
+
     rep = sub.add_parser(
         "replay",
         help="re-run the estimator and controller on a session log",
@@ -385,6 +442,66 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     return _report(result.session, log_path)
 
 
+def _loopback(host: str) -> bool:
+    import ipaddress
+    import socket
+
+    try:
+        addresses = {info[4][0] for info in socket.getaddrinfo(host, None)}
+    except socket.gaierror as exc:
+        raise ConfigError(f"--host: cannot resolve {host!r}: {exc.strerror}") from None
+    return all(ipaddress.ip_address(a.split("%")[0]).is_loopback for a in addresses)
+
+
+def _hw_emulate(args: argparse.Namespace) -> int:
+    import time
+
+    from hoh_cosim.rehearsal.rehearse import UR_SERIES
+    from hoh_cosim.rehearsal.ur_controller import UrController
+    from hoh_cosim.rehearsal.world import RehearsalWorld, WorldSetup
+
+    if args.seconds is not None and not args.seconds > 0:
+        raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")
+    if not 0 <= args.ft_port <= 65535:
+        raise ConfigError(f"--ft-port: expected 0 to 65535, got {args.ft_port}")
+    if not _loopback(args.host) and not args.allow_remote:
+        raise ConfigError(
+            f"--host: {args.host} is not a loopback address; anyone on that network could move "
+            "the emulated arm: add --allow-remote to mean it"
+        )
+    rate = {series: rate for rate, series in UR_SERIES.items()}[args.series]
+    setup = WorldSetup(
+        robot_rate_hz=rate,
+        task=args.task,
+        task_start_s=args.task_start,
+        phantom_below_m=0.03 if args.task in CONTACT_TASKS else None,
+        ft_host=args.host,
+        ft_port=args.ft_port,
+    )
+    with RehearsalWorld(setup) as world:
+        try:
+            controller = UrController(world, args.host, series=args.series)
+            controller.start()
+        except (RuntimeError, OSError) as exc:
+            raise RunError(f"--host {args.host}: {exc}") from None
+        try:
+            name = "e-series, 500 Hz" if args.series == "e" else "CB3, 125 Hz"
+            print(
+                f"UR controller on {args.host} ({name}): dashboard 29999, script 30003, RTDE 30004",
+                flush=True,
+            )
+            print(f"FT-150 stream on {args.host}:{world.ft_port}", flush=True)
+            print(f"FSE103 on {world.pty_name}", flush=True)
+            print("ready" + ("" if args.seconds else " (Ctrl-C ends)"), flush=True)
+            deadline = None if args.seconds is None else time.monotonic() + args.seconds
+            while deadline is None or time.monotonic() < deadline:
+                time.sleep(0.1)
+        finally:
+            controller.stop()
+    print("stopped", flush=True)
+    return 0
+
+
 def _replay(args: argparse.Namespace) -> int:
     from hoh_cosim.hardware.replay import plot_replay, replay
 
@@ -421,6 +538,7 @@ def run_command(args: argparse.Namespace) -> int | None:
         "calibrate": _hw_calibrate,
         "sensors": _hw_sensors,
         "rehearse": _hw_rehearse,
+        "emulate": _hw_emulate,
     }
     if args.hw_command not in handlers:
         raise ConfigError("hw: expected a command: " + ", ".join(handlers))

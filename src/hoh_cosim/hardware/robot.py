@@ -171,6 +171,18 @@ class _RtdePacer:
 _ABANDONED: list[Any] = []  # ur-rtde interfaces of a lost link, never destroyed (see close())
 
 
+RECEIVED = [
+    "timestamp",
+    "actual_TCP_pose",
+    "actual_TCP_speed",
+    "robot_mode",
+    "safety_mode",
+    "safety_status_bits",
+]
+"""What `RtdeRobot.state` reads through ur-rtde's receive interface: only these are asked for (its
+default is every output it knows, at 500 Hz)."""
+
+
 class RtdeRobot:
     """A UR controller over RTDE with ur-rtde (installed with `pip install "hoh-cosim[hardware]"`)."""
 
@@ -210,7 +222,7 @@ class RtdeRobot:
             raise RunError('ur-rtde is not installed: pip install "hoh-cosim[hardware]"') from None
         try:
             self._receive = rtde_receive.RTDEReceiveInterface(
-                self.host, self.frequency_hz, rt_priority=self.rt_priority
+                self.host, self.frequency_hz, RECEIVED, rt_priority=self.rt_priority
             )
             self._control = rtde_control.RTDEControlInterface(
                 self.host, self.frequency_hz, rt_priority=self.rt_priority

@@ -1,14 +1,18 @@
-"""The RTDE wire format (protocol version 2), as a UR controller speaks it on port 30004.
+"""The RTDE wire format (protocol versions 1 and 2), as a UR controller speaks it on port 30004.
 
-Every package is a big-endian header, uint16 size (header included) and uint8 type, then a payload:
+Every package is a big-endian header, uint16 size (header included) and uint8 type, then a payload
+(version 2; where version 1 differs, in brackets):
 
     'V' request protocol version   client: uint16 version        controller: uint8 accepted
     'v' get controller version     client: -                     controller: 4 x uint32
     'O' set up outputs             client: double Hz + names     controller: uint8 recipe + types
+                                   [v1: names]                   [v1: types]
     'I' set up inputs              client: names                 controller: uint8 recipe + types
     'S' start / 'P' pause          client: -                     controller: uint8 accepted
     'U' data package               uint8 recipe id + the recipe's values, both ways
+                                   [v1: the controller's outputs without the recipe id]
     'M' text message               uint8 length + message, uint8 length + source, uint8 level
+                                   [v1, from the controller: uint8 level + message]
 
 Names and types are comma-separated ASCII. A type the controller does not have is NOT_FOUND; an
 input another client already writes is IN_USE. Facts from UR's RTDE guide; the values each variable
@@ -27,6 +31,7 @@ __all__ = [
     "decode_values",
     "encode_values",
     "pack",
+    "parse_text_message",
     "read_package",
     "text_message",
     "zero",
@@ -161,10 +166,33 @@ def pack(kind: str, payload: bytes = b"") -> bytes:
     return HEADER.pack(HEADER.size + len(payload), ord(kind)) + payload
 
 
-def text_message(message: str, source: str = "hoh-cosim", level: int = 1) -> bytes:
-    """An 'M' package (protocol 2); level 0 exception, 1 error, 2 warning, 3 info."""
+LEVELS = ("exception", "error", "warning", "info")  # a text message's level, from 0
+
+
+def text_message(
+    message: str, source: str = "hoh-cosim", level: int = 1, version: int = 2
+) -> bytes:
+    """An 'M' package from the controller; level 0 exception, 1 error, 2 warning, 3 info."""
     m, s = message.encode()[:255], source.encode()[:255]
+    if version == 1:
+        return pack("M", bytes([level]) + message.encode())
     return pack("M", bytes([len(m)]) + m + bytes([len(s)]) + s + bytes([level]))
+
+
+def parse_text_message(payload: bytes) -> tuple[str, str, int]:
+    """A client's 'M' package (the same in both versions): (message, source, level);
+    ValueError if the lengths do not add up."""
+    if not payload:
+        raise ValueError("an empty text message")
+    n = payload[0]
+    message, rest = payload[1 : 1 + n], payload[1 + n :]
+    if len(message) != n or not rest:
+        raise ValueError("a text message shorter than its message length")
+    m = rest[0]
+    source, rest = rest[1 : 1 + m], rest[1 + m :]
+    if len(source) != m or len(rest) != 1:
+        raise ValueError("a text message whose source length or level does not fit")
+    return message.decode(errors="replace"), source.decode(errors="replace"), rest[0]
 
 
 def _exact(sock: Any, n: int) -> bytes:
@@ -189,14 +217,16 @@ def recipe_format(types: list[str]) -> struct.Struct:
     return struct.Struct(">" + "".join(FORMATS[t] for t in types))
 
 
-def encode_values(recipe_id: int, layout: struct.Struct, values: list[Any]) -> bytes:
+def encode_values(recipe_id: int | None, layout: struct.Struct, values: list[Any]) -> bytes:
+    """A 'U' package; `recipe_id` None: without one (a version 1 controller's outputs)."""
     flat: list[Any] = []
     for value in values:
         if isinstance(value, list | tuple):
             flat.extend(value)
         else:
             flat.append(value)
-    return pack("U", bytes([recipe_id]) + layout.pack(*flat))
+    head = b"" if recipe_id is None else bytes([recipe_id])
+    return pack("U", head + layout.pack(*flat))
 
 
 def decode_values(types: list[str], layout: struct.Struct, data: bytes) -> list[Any]:

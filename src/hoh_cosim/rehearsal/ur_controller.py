@@ -9,11 +9,14 @@ a robot.
 What it serves (ports chosen by the caller, defaults 29999, 30003, 30004; ur_rtde itself always uses
 the defaults, so a test gives each emulator its own loopback address, 127.0.0.x):
 - the dashboard server: the banner and the replies ur_rtde reads (`PolyscopeVersion`, `get serial
-  number`, `is in remote control`, `stop`), and the usual status queries;
-- RTDE protocol 2 (`hoh_cosim.rehearsal.rtde_protocol`): version, controller version (5.11 in e-series mode,
-  500 Hz; 3.15 in CB3 mode, 125 Hz), output and input recipes (NOT_FOUND for what it does not have,
-  IN_USE for an input another connection writes), start, pause, data both ways at the robot's rate,
-  text messages for what it refuses;
+  number`, `is in remote control`, `stop`), the status queries, and what a lab script uses (`get
+  robot model`, `get loaded program`, `isProgramSaved`, `get operational mode`, `clear operational
+  mode`, `power on` / `off`, `brake release`, `load`, `play`, `pause`) with UR's documented replies;
+- RTDE protocols 1 and 2 (`hoh_cosim.rehearsal.rtde_protocol`): version, controller version (5.11 in
+  e-series mode, 500 Hz; 3.15 in CB3 mode, 125 Hz), output recipes streamed every floor(rate / f)
+  cycles (NOT_FOUND for what it does not have or model, `NOT_EMULATED`; an out-of-range frequency
+  refused with a reason), input recipes (IN_USE for an input another connection writes), start,
+  pause, data both ways, clients' text messages into its log, text messages for what it refuses;
 - the script port: a program uploaded there starts running (`runtime_state` PLAYING), and then does
   what ur_rtde's control script does for the commands our runner uses, through the same registers:
   the command in `input_int_register_0`, its arguments in `input_double_register_*`, "ready" (1) and
@@ -21,8 +24,8 @@ the defaults, so a test gives each emulator its own loopback address, 127.0.0.x)
   stop (31), setWatchdog (35: the program stops when `input_int_register_0` is not written for
   1/f s, as `rtde_set_watchdog(..., "stop")` does), stop (255). Any other command halts the program
   with a text message: it is not emulated.
-- robot and safety state from the world's arm: TCP pose and speed, joint angles, timestamp, robot
-  mode, safety mode and status bits, runtime state, robot status bits; `inject()` puts the robot in a
+- robot and safety state from the world's arm: TCP pose and speed, joint angles and speeds, the
+  TCP's external wrench, the world's clock as the timestamp, robot mode, safety mode and status bits, runtime state, robot status bits; `inject()` puts the robot in a
   protective stop or an emergency stop, or drops the link (nothing passes either way, as with a
   pulled cable; after a while the controller closes the sockets and refuses new ones for as long).
 
@@ -34,6 +37,7 @@ work.
 from __future__ import annotations
 
 import contextlib
+import math
 import multiprocessing as mp
 import queue
 import re
@@ -53,11 +57,37 @@ from hoh_cosim.rehearsal.world import as_hardware
 
 __all__ = ["INJECTIONS", "UrController", "rotation_vector"]
 
+# what the dashboard server refuses in local control (UR's e-series replies)
+_CONTROL_COMMANDS = {"power", "brake", "load", "play", "stop", "pause", "unlock", "shutdown"}
+_LOCAL_CONTROL = (
+    "Command is not allowed due to safety reasons, please switch robot to Remote Control mode and "
+    "reconnect to port 29999"
+)
+# outputs the guide lists that the emulator does not model (no joint dynamics, I/O or tool
+# electronics): refused at set-up as NOT_FOUND rather than sent as zeros that look like data
+NOT_EMULATED = frozenset(
+    {
+        "target_qdd", "target_current", "target_moment", "actual_current", "joint_control_output",
+        "actual_execution_time", "actual_tool_accelerometer", "actual_momentum",
+        "actual_robot_current", "actual_joint_voltage", "elbow_position", "elbow_velocity",
+        "analog_io_types", "standard_analog_input0", "standard_analog_input1",
+        "standard_analog_output0", "standard_analog_output1", "io_current", "tool_mode",
+        "tool_analog_input_types", "tool_analog_input0", "tool_analog_input1",
+        "tool_output_voltage", "tool_output_current", "tool_temperature", "payload_cog",
+        "payload_inertia", "actual_current_as_torque", "script_control_line", "ft_raw_wrench",
+        "joint_position_deviation_ratio", "collision_detection_ratio",
+    }
+)  # fmt: skip
 INJECTIONS = ("protective_stop", "emergency_stop", "drop_connection", "clear")
 
 # RTDE runtime_state, robot_mode, safety_mode and the safety_status_bits ur_rtde reads
-STOPPED, PLAYING = 1, 2
-ROBOT_MODE_POWER_OFF, ROBOT_MODE_RUNNING = 3, 7
+STOPPED, PLAYING, PAUSED = 1, 2, 4  # RTDE runtime_state
+ROBOT_MODE_POWER_OFF, ROBOT_MODE_IDLE, ROBOT_MODE_RUNNING = 3, 5, 7
+_MODE_NAMES = {
+    ROBOT_MODE_POWER_OFF: "POWER_OFF",
+    ROBOT_MODE_IDLE: "IDLE",
+    ROBOT_MODE_RUNNING: "RUNNING",
+}
 SAFETY_NORMAL, SAFETY_PROTECTIVE, SAFETY_ROBOT_EMERGENCY = 1, 3, 7
 BIT_NORMAL, BIT_PROTECTIVE, BIT_ROBOT_EMERGENCY, BIT_EMERGENCY = 0, 2, 6, 7
 # robot_status_bits: power on, program running
@@ -90,6 +120,7 @@ class _Connection:
     inputs: dict[int, tuple[list[str], list[str], struct.Struct]] = field(default_factory=dict)
     started: bool = False
     every: int = 1  # send every n-th controller cycle
+    version: int = 1  # the RTDE protocol version: 1 until the client asks for 2 (UR's guide)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def send(self, data: bytes) -> None:
@@ -238,12 +269,15 @@ class _Emulator:
         self.connections: list[_Connection] = []
         self.sockets: list[socket.socket] = []
         self.runtime_state = STOPPED
+        self.robot_mode = ROBOT_MODE_RUNNING  # powered, brakes released: a rig ready for work
+        self.loaded: str | None = None  # the program `load` loaded (a name: there are no files)
+        self.playing_loaded = False  # the running program is the loaded one, not a script
         self.protective = self.emergency = False
         self.executing = False
         self.speed_l_active = False
         self.last_cmd = -1
         self.silent_until = 0.0
-        self.outbox: list[bytes] = []
+        self.outbox: list[tuple[str, str, int]] = []
         self.twist = np.zeros(6)
         self.watchdog_hz = 0.0
         self.kicked = time.monotonic()
@@ -363,7 +397,7 @@ class _Emulator:
     def _state(self) -> dict[str, Any]:
         s = self.world._state.read(tries=3)
         p, R, twist, flags = s[0:3], s[3:12], s[12:18], s[18:24]
-        q = s[24:30] if s.size >= 30 else np.zeros(6)
+        q, qd, wrench = s[24:30], s[30:36], s[36:42]
         safety_mode = SAFETY_NORMAL
         bits = 1 << BIT_NORMAL
         if self.protective or flags[2] > 0.5:
@@ -374,14 +408,22 @@ class _Emulator:
         running = self.runtime_state == PLAYING
         pose = list(p) + list(rotation_vector(R.reshape(3, 3)))
         return {
-            "timestamp": self.cycles / self.rate_hz,  # the controller's own clock
+            "timestamp": float(flags[5]),  # the controller clock: the world time, which it drives
             "actual_TCP_pose": pose,
             "target_TCP_pose": pose,
             "actual_TCP_speed": list(twist),
             "target_TCP_speed": list(self.twist),
             "actual_q": list(q),
             "target_q": list(q),
-            "robot_mode": ROBOT_MODE_POWER_OFF if self.emergency else ROBOT_MODE_RUNNING,
+            "actual_qd": list(qd),
+            "target_qd": list(qd),
+            "actual_TCP_force": list(wrench),
+            "tcp_force_scalar": float(np.linalg.norm(wrench[:3])),
+            "actual_digital_input_bits": 0,  # nothing is wired to the emulated controller's I/O
+            "actual_digital_output_bits": 0,
+            "output_bit_registers0_to_31": 0,  # the program sets no output bit
+            "output_bit_registers32_to_63": 0,
+            "robot_mode": ROBOT_MODE_POWER_OFF if self.emergency else self.robot_mode,
             "joint_mode": [253] * 6,  # JOINT_RUNNING_MODE
             "safety_mode": safety_mode,
             "safety_status": safety_mode,
@@ -400,8 +442,8 @@ class _Emulator:
 
     def _program_cycle(self, now: float) -> None:
         """One cycle of the uploaded program (lock held): read the command register, act, answer."""
-        if self.runtime_state != PLAYING:
-            return
+        if self.runtime_state != PLAYING or self.playing_loaded:
+            return  # a loaded .urp plays without moving: the emulator cannot run PolyScope files
         if self.protective or self.emergency:
             self._halt("the robot is stopped by its safety system")
             return
@@ -432,7 +474,7 @@ class _Emulator:
     def _unsupported(self, cmd: int) -> None:
         text = f"command {cmd} is not emulated: the program stops"
         self._halt(text)
-        self._broadcast(rtde.text_message(text, "UR emulator", 1))
+        self._broadcast((text, "UR emulator", 1))
 
     def _process(self, cmd: int) -> None:
         d = [float(self.inputs[f"input_double_register_{i}"]) for i in range(8)]
@@ -469,10 +511,10 @@ class _Emulator:
             self.twist = np.zeros(6)
             self.watchdog_hz = 0.0
             self.kicked = time.monotonic()
-            if self.protective or self.emergency:
-                self._event("program refused: the robot is stopped by its safety system")
+            if self.protective or self.emergency or self.robot_mode != ROBOT_MODE_RUNNING:
+                self._event("program refused: the robot is stopped or not powered and released")
                 return
-            self.runtime_state = PLAYING
+            self.runtime_state, self.playing_loaded = PLAYING, False
         self._event(f"program started ({len(text)} bytes)")
 
     # --- the controller's cycle -----------------------------------------------------------------
@@ -503,14 +545,17 @@ class _Emulator:
                 if not conn.started:
                     continue
                 try:
-                    for message in outbox:
-                        conn.send(message)
+                    for text, source, level in outbox:
+                        conn.send(rtde.text_message(text, source, level, conn.version))
                     if conn.outputs is not None and cycle % conn.every == 0:
                         names, types, layout, _ = conn.outputs
+                        # a register nobody wrote reads 0, as on a controller; every other output
+                        # is in the state or was refused at set-up (NOT_EMULATED)
                         values = [
                             state.get(n, rtde.zero(t)) for n, t in zip(names, types, strict=True)
                         ]
-                        conn.send(rtde.encode_values(1, layout, values))
+                        recipe = 1 if conn.version == 2 else None
+                        conn.send(rtde.encode_values(recipe, layout, values))
                 except OSError:
                     self._forget(conn)
 
@@ -518,9 +563,10 @@ class _Emulator:
         """The input registers, which a controller also offers as outputs."""
         return {k: v for k, v in self.inputs.items() if k in rtde.OUTPUTS}
 
-    def _broadcast(self, data: bytes) -> None:
-        """Queued (the lock may be held): the cycle sends it to every started client."""
-        self.outbox.append(data)
+    def _broadcast(self, message: tuple[str, str, int]) -> None:
+        """A text message (text, source, level), queued (the lock may be held): the cycle sends
+        it to every started client, in the client's protocol version."""
+        self.outbox.append(message)
 
     def _forget(self, conn: _Connection) -> None:
         with self.lock:
@@ -594,43 +640,111 @@ class _Emulator:
 
     def _dashboard_reply(self, command: str) -> str:
         with self.lock:
-            running = self.runtime_state == PLAYING
-            if command == "PolyscopeVersion":
-                return self.polyscope
-            if command == "get serial number":
-                return "20195500001"
-            if command == "is in remote control":
-                return "true" if self.remote_control else "false"
-            if command == "stop":
-                if not running:
-                    return "Failed to execute: stop"
-                self._halt("dashboard stop")
-                return "Stopped"
-            if command == "robotmode":
-                return "Robotmode: POWER_OFF" if self.emergency else "Robotmode: RUNNING"
-            if command in ("safetystatus", "safetymode"):
-                state = "NORMAL"
-                if self.protective:
-                    state = "PROTECTIVE_STOP"
-                if self.emergency:
-                    state = "ROBOT_EMERGENCY_STOP"
-                return f"{command.capitalize()}: {state}"
-            if command == "programState":
-                return "PLAYING rtde_control" if running else "STOPPED <unnamed>"
-            if command == "running":
-                return f"Program running: {'true' if running else 'false'}"
-            if command == "unlock protective stop":
-                if not self.protective or self.emergency:
-                    return "Failed to execute: unlock protective stop"
-                self.protective = False
-                return "Protective stop releasing"
-            if command == "close safety popup":
-                return "closing safety popup"
-            if command == "quit":
-                return "Disconnected"
-            if command in ("play", "pause"):
-                return f"Failed to execute: {command}"
-        return f"could not understand: '{command}'"
+            reply = self._dashboard_query(command)
+            if reply is None:
+                if command.split(" ", 1)[0] in _CONTROL_COMMANDS and not self.remote_control:
+                    return _LOCAL_CONTROL
+                reply = self._dashboard_action(command)
+            return reply if reply is not None else f"could not understand: '{command}'"
+
+    def _program_name(self) -> str:
+        return self.loaded if self.loaded is not None else "<unnamed>"
+
+    def _dashboard_query(self, command: str) -> str | None:
+        """What the dashboard server answers to a question (lock held); None: not a question."""
+        if command == "get robot model":
+            return "UR5"
+        if command == "get loaded program":
+            return f"Loaded program: {self.loaded}" if self.loaded else "No program loaded"
+        if command == "isProgramSaved":
+            return f"true {self._program_name()}"
+        if command == "get operational mode":
+            return "NONE"  # no mode password set, as on a rig without one
+        if command == "PolyscopeVersion":
+            return self.polyscope
+        if command == "get serial number":
+            return "20195500001"
+        if command == "is in remote control":
+            return "true" if self.remote_control else "false"
+        if command == "robotmode":
+            mode = ROBOT_MODE_POWER_OFF if self.emergency else self.robot_mode
+            return f"Robotmode: {_MODE_NAMES[mode]}"
+        if command in ("safetystatus", "safetymode"):
+            state = "NORMAL"
+            if self.protective:
+                state = "PROTECTIVE_STOP"
+            if self.emergency:
+                state = "ROBOT_EMERGENCY_STOP"
+            return f"{command.capitalize()}: {state}"
+        if command == "running":
+            return f"Program running: {'true' if self.runtime_state == PLAYING else 'false'}"
+        if command == "programState":
+            state = {PLAYING: "PLAYING", PAUSED: "PAUSED"}.get(self.runtime_state, "STOPPED")
+            name = (
+                self._program_name()
+                if self.playing_loaded or state == "STOPPED"
+                else "rtde_control"
+            )
+            return f"{state} {name}"
+        return None
+
+    def _dashboard_action(self, command: str) -> str | None:
+        """What the dashboard server does and answers (lock held); None: unknown."""
+        running = self.runtime_state == PLAYING
+        if command == "clear operational mode":
+            return "No longer controlling the operational mode. Current operational mode: 'NONE'."
+        if command == "power on":
+            if self.robot_mode == ROBOT_MODE_POWER_OFF and not self.emergency:
+                self.robot_mode = ROBOT_MODE_IDLE
+            return "Powering on"
+        if command == "power off":
+            self._halt("power off")
+            self.robot_mode = ROBOT_MODE_POWER_OFF
+            return "Powering off"
+        if command == "brake release":
+            if self.robot_mode == ROBOT_MODE_POWER_OFF:
+                self.robot_mode = ROBOT_MODE_IDLE
+            if not self.emergency:
+                self.robot_mode = ROBOT_MODE_RUNNING
+            return "Brake releasing"
+        if command.startswith("load "):
+            name = command[5:].strip()
+            if not name.endswith(".urp"):
+                return f"File not found: {name}"
+            if running:
+                self._halt("load")
+            self.loaded, self.runtime_state = name, STOPPED
+            return f"Loading program: {name}"
+        if command == "play":
+            ready = self.robot_mode == ROBOT_MODE_RUNNING and not (
+                self.protective or self.emergency
+            )
+            if self.loaded is None or not ready:
+                return "Failed to execute: play"
+            self.runtime_state, self.playing_loaded = PLAYING, True
+            self._event(f"program started: {self.loaded}")
+            return "Starting program"
+        if command == "pause":
+            if not running:
+                return "Failed to execute: pause"
+            self._halt("dashboard pause")
+            self.runtime_state = PAUSED
+            return "Pausing program"
+        if command == "stop":
+            if self.runtime_state not in (PLAYING, PAUSED):
+                return "Failed to execute: stop"
+            self._halt("dashboard stop")
+            return "Stopped"
+        if command == "unlock protective stop":
+            if not self.protective or self.emergency:
+                return "Failed to execute: unlock protective stop"
+            self.protective = False
+            return "Protective stop releasing"
+        if command == "close safety popup":
+            return "closing safety popup"
+        if command == "quit":
+            return "Disconnected"
+        return None
 
     def _script(self, sock: socket.socket) -> None:
         """The script port: a program is `def name():` ... `end`, the first line unindented."""
@@ -669,8 +783,11 @@ class _Emulator:
         kind, payload = package.kind, package.payload
         if kind == "V":
             version = struct.unpack(">H", payload[:2])[0] if len(payload) >= 2 else 0
-            self._event(f"rtde protocol {version}")
-            self._reply(conn, "V", bytes([1 if version == 2 else 0]))
+            accepted = version in (1, 2) and not conn.started
+            if accepted:
+                conn.version = version
+            self._event(f"rtde protocol {version} {'accepted' if accepted else 'refused'}")
+            self._reply(conn, "V", bytes([1 if accepted else 0]))
         elif kind == "v":
             self._reply(conn, "v", struct.pack(">IIII", *self.version))
         elif kind == "O":
@@ -688,27 +805,60 @@ class _Emulator:
             self._reply(conn, "P", bytes([1]))
         elif kind == "U":
             self._data(conn, payload)
+        elif kind == "M":  # a client's message: into the controller's log, no reply (the guide)
+            try:
+                text, source, level = rtde.parse_text_message(payload)
+            except ValueError as exc:
+                self._event(f"rtde text message refused: {exc}")
+                return
+            name = rtde.LEVELS[level] if level < len(rtde.LEVELS) else f"level {level}"
+            self._event(f"rtde message from {source} ({name}): {text}")
         else:
             self._event(f"rtde: unknown package type {package.type}")
-            conn.send(rtde.text_message(f"unknown package type {package.type}"))
+            conn.send(
+                rtde.text_message(f"unknown package type {package.type}", version=conn.version)
+            )
 
     def _setup_outputs(self, conn: _Connection, payload: bytes) -> None:
-        if conn.started or len(payload) < 8:
+        """Version 2: a frequency and names; version 1: names only, streamed at the controller's
+        rate. The stream runs every floor(rate / frequency) cycles (UR's guide: "the output rate
+        will be according to floor(125 / frequency)" on a CB3; the same rule at 500 Hz on an
+        e-series). A frequency outside 0 < f <= rate or a name not found: recipe id 0 and an
+        error text message saying why, and `start` is refused."""
+        v2 = conn.version == 2
+        if conn.started or (v2 and len(payload) < 8):
             why = "while started" if conn.started else "without a frequency"
             self._event(f"rtde output setup refused: {why}")
-            self._reply(conn, "O", bytes([0]))
+            self._reply(conn, "O", bytes([0]) if v2 else b"")
             return
-        frequency = struct.unpack(">d", payload[:8])[0]
-        names = [n for n in payload[8:].decode(errors="replace").split(",") if n]
-        types = [rtde.OUTPUTS.get(n, "NOT_FOUND") for n in names]
-        bad = not (0 < frequency <= self.rate_hz) or "NOT_FOUND" in types or not names
+        frequency = struct.unpack(">d", payload[:8])[0] if v2 else self.rate_hz
+        text = payload[8:] if v2 else payload
+        names = [n for n in text.decode(errors="replace").split(",") if n]
+        types = [
+            "NOT_FOUND" if n in NOT_EMULATED else rtde.OUTPUTS.get(n, "NOT_FOUND") for n in names
+        ]
+        missing = [n for n, t in zip(names, types, strict=True) if t == "NOT_FOUND"]
+        problems = []
+        if not 0 < frequency <= self.rate_hz:
+            problems.append(
+                f"output frequency {frequency:g} Hz is outside 0 < f <= {self.rate_hz:g} Hz"
+            )
+        if missing:
+            problems.append(f"outputs not found: {', '.join(missing)}")
+        if not names:
+            problems.append("no outputs named")
         self._event(
-            f"rtde outputs at {frequency:g} Hz: {len(names)} variables, {types.count('NOT_FOUND')} not found"
+            f"rtde outputs at {frequency:g} Hz: {len(names)} variables, {len(missing)} not found"
+            + (f" ({', '.join(missing)})" if missing else "")
         )
-        if not bad:
+        if problems:
+            conn.outputs = None
+            conn.send(rtde.text_message("; ".join(problems), "RTDE", 1, conn.version))
+        else:
             conn.outputs = (names, types, rtde.recipe_format(types), frequency)
-            conn.every = max(1, round(self.rate_hz / frequency))
-        self._reply(conn, "O", bytes([0 if bad else 1]) + ",".join(types).encode())
+            conn.every = max(1, math.floor(self.rate_hz / frequency + 1e-9))
+        recipe = bytes([0 if problems else 1]) if v2 else b""
+        self._reply(conn, "O", recipe + ",".join(types).encode())
 
     def _setup_inputs(self, conn: _Connection, payload: bytes) -> None:
         names = [n for n in payload.decode(errors="replace").split(",") if n]
@@ -744,14 +894,15 @@ class _Emulator:
         if not conn.started or recipe not in conn.inputs:
             why = "before start" if not conn.started else f"for unknown recipe {recipe}"
             self._event(f"rtde data refused: {why}")
-            conn.send(rtde.text_message(f"data package {why} ignored", "RTDE", 1))
+            conn.send(rtde.text_message(f"data package {why} ignored", "RTDE", 1, conn.version))
             return
         names, types, layout = conn.inputs[recipe]
         try:
             values = rtde.decode_values(types, layout, payload[1:])
         except ValueError as exc:
             self._event(f"rtde data refused: {exc}")
-            conn.send(rtde.text_message(f"data package for recipe {recipe}: {exc}", "RTDE", 1))
+            message = f"data package for recipe {recipe}: {exc}"
+            conn.send(rtde.text_message(message, "RTDE", 1, conn.version))
             return
         with self.lock:
             for name, value in zip(names, values, strict=True):

@@ -56,7 +56,8 @@ WORLD_DT = 1e-3
 
 # shared memory: [sequence, values...], written under a sequence lock (no lock a reader could
 # wait on: the runner must never wait for another process)
-_STATE = 3 + 9 + 6 + 6 + 6  # p, R, twist, [mode, safety, protective, emergency, program, time], q
+# p, R, twist, [mode, safety, protective, emergency, program, time], q, qd, the TCP's wrench
+_STATE = 3 + 9 + 6 + 6 + 6 + 6 + 6
 _COMMAND = 6 + 4  # twist, [acceleration, kick time, stop, sequence]
 
 
@@ -101,6 +102,8 @@ class WorldSetup:
     probe_byte_order: str = "little"
     seed: int = 1
     faults: tuple[Fault, ...] = field(default_factory=tuple)
+    ft_host: str = "127.0.0.1"  # where the FT-150 stream listens
+    ft_port: int = 0  # 0: any free port (the URCap's daemon uses 63351)
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -151,7 +154,7 @@ class _World:
         rng = np.random.default_rng(setup.seed)
         self.ft = FT150Sensor(FT150Params(rate_hz=setup.ft_rate_hz), rng=rng)
         self.probe = FSE103Sensor(FSE103Params(), rng=rng)
-        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.listener = socket.create_server((setup.ft_host, setup.ft_port))
         self.listener.setblocking(False)
         self.ft_port = self.listener.getsockname()[1]
         self.client: socket.socket | None = None
@@ -170,6 +173,7 @@ class _World:
         self.nan_next = False
         self.outputs = self.plant.initial_outputs()
         self.hand = {"F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3), "F_tip_B": np.zeros(3)}
+        self.p_SH_S = np.asarray(self.plant.params.tool.p_SH_S, dtype=float)
 
     def truth(self) -> dict[str, Any]:
         """What a perfect calibration would find: the tool and the FT-150's offset."""
@@ -249,7 +253,21 @@ class _World:
             0.0 if self.program_stopped else 1.0,
             t,
         ]
-        self.state.write(np.concatenate([o["p_BT_B"], o["R_BT"], o["twist_B"], flags, o["q"]]))
+        self.state.write(
+            np.concatenate(
+                [o["p_BT_B"], o["R_BT"], o["twist_B"], flags, o["q"], o["qd"], self._tcp_wrench()]
+            )
+        )
+
+    def _tcp_wrench(self) -> Vec:
+        """The external wrench on the tool at the TCP, in B [N, N·m], as a UR's `actual_TCP_force`
+        reports it (the payload's weight and inertia compensated): the hand at the handle, the
+        phantom and any push at the tip (the TCP)."""
+        o, hand = self.outputs, self.hand
+        force = hand["F_hand_B"] + hand["F_tip_B"] + o["F_contact_B"]
+        p_BH = o["p_BS_B"] + o["R_BS"].reshape(3, 3) @ self.p_SH_S
+        torque = hand["tau_hand_B"] + np.cross(p_BH - o["p_BT_B"], hand["F_hand_B"])
+        return np.concatenate([force, torque])
 
     # --- the loop ------------------------------------------------------------------------------
 
@@ -272,7 +290,7 @@ class _World:
         if round(t / WORLD_DT) % 20 == 0:  # look for a client every 20 ms
             self._accept()
         twist = self._command(time.monotonic())
-        hand = self.operator.step(t, WORLD_DT, self.outputs)
+        hand = self.hand = self.operator.step(t, WORLD_DT, self.outputs)
         self.outputs = self.plant.step(
             t,
             WORLD_DT,
