@@ -425,6 +425,8 @@ def test_hw_emulate_serves_a_dashboard_client_ur_rtde_and_raw_sensor_readers(tmp
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
+        # a pytest-xdist worker's children inherit SIGINT ignored: give it Python's default
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )  # fmt: skip
     try:
         where = _started(process)
@@ -490,7 +492,11 @@ def test_hw_emulate_serves_a_dashboard_client_ur_rtde_and_raw_sensor_readers(tmp
             os.close(fd)
     finally:
         process.send_signal(signal.SIGINT)
-        output = process.communicate(timeout=30)[0]
+        try:
+            output = process.communicate(timeout=30)[0]
+        except subprocess.TimeoutExpired:
+            process.kill()
+            output = process.communicate()[0] + "\n(killed: Ctrl-C did not end it in 30 s)"
     assert process.returncode == 130, output  # Ctrl-C: "interrupted", as everywhere
     assert "interrupted" in output, output
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -453,6 +454,10 @@ def _loopback(host: str) -> bool:
     return all(ipaddress.ip_address(a.split("%")[0]).is_loopback for a in addresses)
 
 
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
 def _hw_emulate(args: argparse.Namespace) -> int:
     import time
 
@@ -470,6 +475,8 @@ def _hw_emulate(args: argparse.Namespace) -> int:
             "the emulated arm: add --allow-remote to mean it"
         )
     rate = {series: rate for rate, series in UR_SERIES.items()}[args.series]
+    # a script that started it may end it with SIGTERM: stop the devices' processes as on Ctrl-C
+    signal.signal(signal.SIGTERM, _interrupt)
     setup = WorldSetup(
         robot_rate_hz=rate,
         task=args.task,
