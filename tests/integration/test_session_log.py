@@ -651,3 +651,16 @@ def test_a_ring_overflow_while_the_writer_reads_logs_each_row_at_most_once(tmp_p
     for topic in CYCLE_TOPICS:
         for message in session.messages[topic]:
             assert_constant(message, topic)
+
+
+def test_events_handed_over_just_before_close_are_all_written(tmp_path):
+    """The queue's thread carries events to the writer; close waits for it, so the last ones (the
+    end, a stop's cause) are never lost to a writer told to finish first."""
+    path = tmp_path / "burst.mcap"
+    log = SessionLog(path, {"kind": "test"}).start()
+    for i in range(2000):
+        log.event(0, 0.0, "note", f"event {i}")
+    log.close()
+    log.event(0, 0.0, "late", "after close: not written, and no error")
+    events = read_session(path).messages["/events"]
+    assert [e["detail"] for e in events] == [f"event {i}" for i in range(2000)]

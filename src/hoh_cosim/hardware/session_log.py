@@ -447,12 +447,18 @@ class SessionLog:
         self._written.value = n + 1
 
     def event(self, k: int, t: float, event: str, detail: str = "") -> None:
-        self._events.put((k, t, event, detail))
+        if self._process is not None:  # after close, nothing more is written
+            self._events.put((k, t, event, detail))
 
     def close(self) -> None:
         """Let the writer write everything handed over, the summary and the footer."""
         if self._process is None:
             return
+        # the queue's own thread carries events to the pipe: wait until it has carried every one,
+        # or the writer, told to finish, could find the pipe empty and lose the last (the `end`
+        # event, a stop's cause; seen once in a loaded test run)
+        self._events.close()
+        self._events.join_thread()
         self._stop.set()
         self._process.join(30.0)
         if self._process.is_alive():
