@@ -25,7 +25,7 @@ from hoh_cosim.control.gravity import GravityCalibration, identify_gravity
 from hoh_cosim.control.sequencer import SequencerParams, servo_twist, tilted_orientations
 from hoh_cosim.control.vectors import GRAVITY_B, Rot3, Vec
 from hoh_cosim.errors import IdentificationError, RunError
-from hoh_cosim.hardware.robot import Robot
+from hoh_cosim.hardware.robot import Robot, named_problem
 from hoh_cosim.hardware.streams import Mailbox
 
 __all__ = ["CalibrationRun", "calibrate", "save"]
@@ -54,7 +54,7 @@ class _Cycles:
     def step(self, twist: Vec) -> Any:
         self.pacer.wait()
         state = self.robot.state()
-        problem = state.problem()
+        problem = named_problem(self.robot, state)
         if problem is not None:
             raise RunError(f"{self.robot.describe()}: {problem}")
         self.robot.speed_l(twist, self.acceleration)

@@ -296,8 +296,9 @@ class RtdeRobot:
         control, _ = self._need()
         self._commanded = True
         if not control.speedL([float(x) for x in twist_B], float(acceleration), 0.0):
-            # refused: name why, as the robot reports it now (a stop may have come since state())
-            problem = self.state().problem()
+            # refused: name why, as the robot reports it now (a stop may have come since state(),
+            # its safety bits perhaps a packet after the stopped program: named_problem)
+            problem = named_problem(self, self.state())
             raise RunError(
                 f"{self.describe()}: speedL was refused" + (f": {problem}" if problem else "")
             )
