@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 import sys
 
+from hoh_cosim.control.block import variable_step
 from hoh_cosim.fmi.build import fmu_name
 from hoh_cosim.fmi.slave import VariableSpec, block_interface
 from hoh_cosim.kinds import KINDS, ComponentKind
@@ -28,14 +29,18 @@ One FMI 2.0 co-simulation FMU per component, built with pythonfmu from the entry
 one block of `hoh_cosim` or `plant_models` through `hoh_cosim.fmi.slave.BlockSlave`:
 
 - every element of a vector port is a Real variable named `port[i]`, i from 1; a scalar port keeps
-  its bare name; inputs start at 0, outputs are valid from initialisation on;
+  its bare name; inputs start at a world at rest (below: whose initial outputs), so that the FMU
+  runs alone with its defaults; outputs are valid from initialisation on;
 - every parameter is an FMI parameter, named by its path in the parameter tree (`tool.mass_kg`,
   `hand_force_kalman.q[2]`); *tunable* ones may change between steps (a scheduled event), the others
   only before initialisation;
 - a block that draws random numbers has an Integer parameter `seed`; the same seed gives the same
   numbers;
-- the step size is free (`canHandleVariableCommunicationStepSize`); a step from t to t + h computes
-  the outputs at t + h from the inputs set before it, with no direct feedthrough inside a step.
+- a step from t to t + h computes the outputs at t + h from the inputs set before it, with no direct
+  feedthrough inside a step. The plant, the Panda and the sensors take any step
+  (`canHandleVariableCommunicationStepSize`: the 1 ms result for steps of 1 to 50 ms); the others are
+  sampled systems whose first step is their period, and refuse another;
+- fmi2GetFMUstate / fmi2SetFMUstate and their serialisation are supported.
 
 The FMUs run Python: the importing tool must load them in an environment where `hoh-cosim` is
 installed (the same Python that built them).
@@ -96,6 +101,13 @@ def kind_variables(kind: ComponentKind) -> list[str]:
     lines: list[str] = []
     specs = block_interface(kind.block, kind.params)
     lines.append(f"{kind.description[0].upper()}{kind.description[1:]}: `{kind.block.__name__}`.\n")
+    step = "any" if variable_step(kind.block) else "fixed (its first step is its sample period)"
+    starts = (
+        f"the {fmu_name(kind.starts_from)} FMU's initial outputs, where the names agree; else 0"
+        if kind.starts_from
+        else "0"
+    )
+    lines.append(f"Communication step: {step}. Inputs start at: {starts}.\n")
     for causality, title in (("input", "Inputs"), ("output", "Outputs")):
         rows = _grouped([s for s in specs if s.causality == causality])
         lines.append(f"{title}:\n")

@@ -10,14 +10,17 @@ An FMU's entry script in `fmus/` only names the block and its parameter class:
 
 and the adapter does the rest, the same way for every block:
 - every element of every port becomes a Real variable (`wrench_S[1]` … `wrench_S[6]`, a scalar port
-  keeps its bare name), inputs with start 0, outputs calculated;
+  keeps its bare name), inputs starting where the build says (`INPUT_STARTS`: a world at rest,
+  else 0), outputs calculated;
 - every parameter leaf (see `hoh_cosim.params`) becomes a parameter, tunable where the parameter
   class says it may change while running, fixed otherwise; a block that draws random numbers gets an
   Integer parameter `seed`;
 - the block is built when initialisation starts (and rebuilt if parameters change before it ends),
   and its outputs are computed right away, so they are valid during initialisation;
 - `do_step` is read inputs -> `block.step(t, dt, inputs)` -> write outputs and nothing else; a tunable
-  parameter set between steps reaches the block through its `retune` before the next step.
+  parameter set between steps reaches the block through its `retune` before the next step; a
+  block that is not `variable_step` refuses a step other than its first;
+- the FMU state (get, set, serialise) is the adapter's values and the block, pickled.
 
 Reals come first in value-reference order (inputs, outputs, real parameters), so a value reference
 indexes one float array and get/set are single numpy operations instead of pythonfmu's per-variable
