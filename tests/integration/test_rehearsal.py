@@ -116,6 +116,10 @@ def assert_stopped_and_logged(outcome: Outcome, cause: str) -> None:
 
 def test_a_clean_session_guides_the_robot_and_logs_every_cycle(tmp_path):
     outcome = run_session(tmp_path, 5.0)
+    # the rates the rebias measured and handed to the filters: the FT-150's on receipt times
+    # (the world sends 200 Hz), the FSE103's on its own time stamps (50 Hz, whole milliseconds)
+    assert 1.0 / outcome.result.rebias.ft_period_s == pytest.approx(200.0, rel=0.05)
+    assert 1.0 / outcome.result.rebias.probe_period_s == pytest.approx(50.0, rel=0.03)
     result = outcome.result
     assert result.clean
     assert result.cause == "5 s done"
@@ -215,6 +219,82 @@ def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):
     assert result.cause.startswith("rebias refused")
     assert result.cycles == 0
     assert not after.program_running
+
+
+def test_a_stream_faster_than_its_datasheet_allows_is_refused_at_the_rebias(tmp_path):
+    # 500 Hz is no FT-150 rate: the periods would go to the filters, so the rebias refuses
+    with RehearsalWorld(WorldSetup(ft_rate_hz=500.0)) as world:
+        config = rehearsal_config(world, tmp_path, rebias_samples=200)
+        robot = world.robot()
+        runner = Runner(
+            config,
+            robot,
+            FT150Stream("127.0.0.1", world.ft_port),
+            FSE103Port(world.pty_name, reconnect=False),
+            truth_calibration(world.truth),
+        )
+        result = runner.run(3.0)
+        after = stopped_state(robot)
+    assert not result.clean
+    found = re.search(
+        r"^rebias refused: FT-150 stream at \S+ measured at ([\d.]+) Hz \(receipt times\), "
+        r"outside the 50-250 Hz its datasheet allows",
+        result.cause,
+    )
+    assert found, result.cause
+    assert 400.0 <= float(found[1]) <= 510.0
+    assert result.cycles == 0
+    assert not after.program_running
+
+
+class StallingRobot:
+    """The world's robot, but one `state()` call, the `at`-th, takes `stall_s` longer: this
+    process held up past the watchdog, as a machine starved of CPU does to a loop without
+    real-time priority."""
+
+    def __init__(self, robot: Robot, at: int, stall_s: float) -> None:
+        self._robot, self._at, self._stall_s, self._calls = robot, at, stall_s, 0
+
+    def __getattr__(self, name: str):
+        return getattr(self._robot, name)
+
+    def state(self) -> RobotState:
+        self._calls += 1
+        if self._calls == self._at:
+            time.sleep(self._stall_s)
+        return self._robot.state()
+
+
+def test_a_loop_starved_past_the_watchdog_is_named_as_such(tmp_path):
+    setup = WorldSetup(task="circle", task_start_s=2.0, watchdog_hz=5.0)
+    with RehearsalWorld(setup) as world:
+        config = rehearsal_config(world, tmp_path, rebias_samples=100)
+        robot = StallingRobot(world.robot(), at=600, stall_s=0.5)  # past the rebias, in the loop
+        log_path = tmp_path / "session.mcap"
+        log = SessionLog(log_path, {}).start()
+        runner = Runner(
+            config,
+            robot,
+            FT150Stream("127.0.0.1", world.ft_port),
+            FSE103Port(world.pty_name, reconnect=False),
+            truth_calibration(world.truth),
+            log,
+        )
+        result = runner.run(10.0)
+        after = stopped_state(robot)
+    # the robot's watchdog stopped the program meanwhile; the cause is the stall, not that
+    found = re.fullmatch(
+        r"the control loop was starved: no command for (\d+) ms before cycle \d+, past the "
+        r"robot's 200 ms watchdog \(this machine is overloaded, or the loop lacks its real-time "
+        r"priority\)",
+        result.cause,
+    )
+    assert found, result.cause
+    assert 450 <= int(found[1]) <= 2000
+    assert not after.program_running
+    events = read_session(log_path).messages["/events"]
+    assert events[-1]["event"] == "end"
+    assert events[-1]["detail"] == result.cause
 
 
 def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,7 @@ from hoh_cosim.control.supervisor import (
     check_inputs,
     limit_command,
     robot_cause,
+    starved_cause,
     supervise,
 )
 from tests.estimates import controller_inputs
@@ -199,6 +202,52 @@ def test_a_long_probe_silence_ends_the_session_during_a_short_ft150_gap():
         probe_error="read timed out",
     )
     assert_stopped(verdict, f"{PROBE}: no new sample for 300 ms (read timed out)")
+
+
+def test_a_silence_on_an_overloaded_machine_is_named_so():
+    overload = "this machine was overloaded: tasks waited for a CPU 80 % of the last 190 ms"
+    verdict = verdict_of(Status.STALE_PROBE, HELD, estimate={"probe_age": 0.25}, overload=overload)
+    assert_stopped(
+        verdict,
+        f"{PROBE}: no new sample for 250 ms ({overload}: its delivery was starved, not "
+        "necessarily the device)",
+    )
+
+
+def test_a_readers_own_error_comes_before_the_machines_load():
+    verdict = verdict_of(
+        Status.STALE_FT, HELD, estimate={"ft_age": 0.3}, ft_error="connection lost", overload="x"
+    )
+    assert_stopped(verdict, f"{FT}: no new sample for 300 ms (connection lost)")
+
+
+def test_the_machines_load_alone_ends_nothing():
+    # the load only names a silence that ends the session anyway
+    verdict = verdict_of(Status.STALE_FT, HELD, estimate={"ft_age": 0.1}, overload="x")
+    assert verdict.cause is None
+
+
+@pytest.mark.parametrize(
+    ("silent_s", "cause"),
+    [
+        (0.0, None),
+        (0.049, None),
+        (
+            0.05,
+            "the control loop was starved: no command for 50 ms before cycle 7, past the "
+            "robot's 50 ms watchdog (this machine is overloaded, or the loop lacks its real-time "
+            "priority)",
+        ),
+    ],
+)
+def test_a_silence_as_long_as_the_watchdog_is_a_starved_loop(silent_s, cause):
+    policy = SessionPolicy(LimitParams(), watchdog_s=0.05)
+    assert starved_cause(policy, 7, silent_s) == cause
+
+
+def test_without_a_watchdog_no_silence_ends_a_session():
+    assert starved_cause(POLICY, 1, 10.0) is None
+    assert starved_cause(POLICY, 1, math.inf) is None
 
 
 def test_a_stale_probe_flag_without_a_probe_stops_the_controller():

@@ -161,10 +161,12 @@ def control_cycle(
     *,
     ft_error: str | None = None,
     probe_error: str | None = None,
+    overload: str | None = None,
 ) -> Cycle:
     """Estimator, controller and supervisor on one cycle's reading (the block contract's time:
     `t` is the cycle number times `dt`). `ft_error` and `probe_error` are what the streams'
-    readers last reported, for the supervisor's message."""
+    readers last reported, `overload` how starved the CPU was while a stream was stale, for the
+    supervisor's message."""
     estimator, controller = blocks.estimator, blocks.controller
     blocks._ft_counter[0] = reading.ft_count
     blocks._probe_counter[0] = reading.probe_count
@@ -191,6 +193,7 @@ def control_cycle(
         checking=blocks.checking,
         ft_error=ft_error,
         probe_error=probe_error,
+        overload=overload,
     )
     return Cycle(reading, estimate, command, verdict, events)
 

@@ -11,6 +11,16 @@ Every safety decision lives here, as pure functions over what the loop knows:
                     non-finite value, a stop flag (a stale stream is a gap that zeroes the command
                     for up to `stale_stop_s`, then the end), a command outside the limits
                                                                     → send, or end with the cause
+    starved_cause   a cycle that reads the robot later after the last command than the robot's
+                    watchdog allows: the loop itself was starved, whatever the robot says now
+                                                                    → end with that cause
+
+A stream's age counts the loop's cycles, not the wall clock: a loop held up for 100 ms runs one
+late cycle, not fifty, so its own stall never makes a stream stale; a stall past the watchdog is
+named as the loop's. A stream silent for
+`stale_stop_s` of cycles on a machine whose CPU was overloaded meanwhile is named so: on Linux the
+bytes of a serial device pass through a kernel worker that an overloaded machine starves, so such a
+silence says little about the device.
 
 Two kinds of outcome, one `Status` flag set:
 - clamps that change the command and let it through (speed, acceleration, workspace, soft force
@@ -56,6 +66,7 @@ __all__ = [
     "check_inputs",
     "limit_command",
     "robot_cause",
+    "starved_cause",
     "supervise",
 ]
 
@@ -257,6 +268,7 @@ class SessionPolicy:
     robot: str = "the robot"  # the devices' names, as the messages give them
     ft: str = "FT-150"
     probe: str | None = None  # None: no probe sensor
+    watchdog_s: float = math.inf  # the robot's watchdog: it stops the arm after this silence
 
 
 @dataclass(frozen=True)
@@ -277,6 +289,19 @@ def robot_cause(policy: SessionPolicy, problem: str) -> str:
     return f"{policy.robot}: {problem}"
 
 
+def starved_cause(policy: SessionPolicy, cycle: int, silent_s: float) -> str | None:
+    """The cause to end with when cycle `cycle` read the robot `silent_s` after the last command:
+    at or past the robot's watchdog the robot has stopped itself, and the loop's stall, not what
+    the robot reports now ("program not running"), is why."""
+    if math.isinf(policy.watchdog_s) or not silent_s >= policy.watchdog_s:
+        return None
+    return (
+        f"the control loop was starved: no command for {1e3 * silent_s:.0f} ms before cycle "
+        f"{cycle}, past the robot's {1e3 * policy.watchdog_s:.0f} ms watchdog (this machine is "
+        "overloaded, or the loop lacks its real-time priority)"
+    )
+
+
 def supervise(
     policy: SessionPolicy,
     status: Status,
@@ -288,16 +313,18 @@ def supervise(
     checking: bool = False,
     ft_error: str | None = None,
     probe_error: str | None = None,
+    overload: str | None = None,
 ) -> Verdict:
     """Decide one cycle of a session: send the controller's twist, send zero, or end the session.
 
     `status` is the controller's, `estimate` the estimator's outputs (for the ages and the probe
     force), `ft` and `probe` the raw samples the cycle read (None: none yet), `checking` whether the
     probe check runs (the estimator is not ready by design then, and the robot holds still), the
-    errors what the streams' readers last reported, for the message."""
+    errors what the streams' readers last reported, for the message, and `overload` how starved the
+    machine's CPU was while a stream was stale (None: not measured, or not starved)."""
     if checking:
         status &= ~Status.NOT_READY
-    cause = _stop_cause(policy, status, estimate, ft, probe, ft_error, probe_error)
+    cause = _stop_cause(policy, status, estimate, ft, probe, ft_error, probe_error, overload)
     if cause is None:
         cause = _command_cause(policy.limits, twist_B)
     return Verdict(status, _ZERO_TWIST if cause else twist_B, cause)
@@ -311,6 +338,7 @@ def _stop_cause(
     probe: Vec | None,
     ft_error: str | None,
     probe_error: str | None,
+    overload: str | None,
 ) -> str | None:
     for name, values in ((policy.ft, ft), (policy.probe, probe)):
         if values is not None and not np.all(np.isfinite(values)):
@@ -331,6 +359,8 @@ def _stop_cause(
         if status & flag and name is not None:
             age = float(estimate[age_port][0])
             if age >= policy.stale_stop_s:
+                if error is None and overload is not None:
+                    error = f"{overload}: its delivery was starved, not necessarily the device"
                 return f"{name}: no new sample for {1e3 * age:.0f} ms ({error or 'the stream stalled'})"
             gaps |= flag
     if not (status & STOP_FLAGS) & ~gaps:

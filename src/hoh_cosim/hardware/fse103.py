@@ -372,6 +372,11 @@ class FSE103Port:
     can be started again after `stop()`; it is usable as a context manager.
     """
 
+    rate_band_hz = (40.0, 60.0)
+    """Packet rates a rebias accepts: the seed's FSE103 sent 50 Hz (seed section 2), a fifth
+    either side (measured on the device's own time stamps, so only another device or another
+    setting of it is that far off)."""
+
     def __init__(
         self,
         device: str,

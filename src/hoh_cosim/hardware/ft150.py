@@ -153,6 +153,10 @@ class FT150Stream:
     once; make a new one to start again. Usable as a context manager (start, then stop on exit).
     """
 
+    rate_band_hz = (50.0, 250.0)
+    """Packet rates a rebias accepts: the sensor has been seen at 62.5, 100 and 200 Hz (notes,
+    seed 3.B: a packet every 5 ms), with a fifth to spare."""
+
     def __init__(
         self,
         host: str,

@@ -41,16 +41,17 @@ from hoh_cosim.control.controller import HandGuidingController
 from hoh_cosim.control.cycle import ControlBlocks, Reading, SensorSetup, control_cycle
 from hoh_cosim.control.estimator import Estimator, import_filter_libraries
 from hoh_cosim.control.gravity import GravityCalibration, GravityModel
-from hoh_cosim.control.supervisor import SessionPolicy, robot_cause
+from hoh_cosim.control.supervisor import SessionPolicy, Status, robot_cause, starved_cause
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.config import HardwareConfig
+from hoh_cosim.hardware.pressure import CpuPressure
 from hoh_cosim.hardware.robot import Robot, RobotState, named_problem
 from hoh_cosim.hardware.session_log import CycleRecord, SessionLog
-from hoh_cosim.hardware.streams import Mailbox, ReaderThread, Sample
+from hoh_cosim.hardware.streams import Mailbox, RateCheck, ReaderThread, Sample, robust_period
 from hoh_cosim.params import leaves
 
-__all__ = ["CycleTiming", "Rebias", "Runner", "SessionResult", "Source"]
+__all__ = ["CycleTiming", "LatencyHistogram", "Rebias", "Runner", "SessionResult", "Source"]
 
 
 class Source(Protocol):
@@ -58,27 +59,66 @@ class Source(Protocol):
 
     mailbox: Mailbox
 
+    rate_band_hz: tuple[float, float]  # the packet rates its datasheet allows
+
     def start(self) -> None: ...
     def stop(self) -> None: ...
     def describe(self) -> str: ...
+
+
+class LatencyHistogram:
+    """Durations counted in 1 µs bins up to `limit_s`, the largest kept exactly: percentiles to the
+    microsecond in a fixed amount of memory, however long the session (a list of every cycle's
+    figures grew by 32 kB a second at 500 Hz)."""
+
+    def __init__(self, limit_s: float = 0.1, resolution_s: float = 1e-6) -> None:
+        self.resolution_s = resolution_s
+        self.counts = np.zeros(round(limit_s / resolution_s) + 1, dtype=np.int64)  # last: above
+        self.n = 0
+        self.max_s = math.nan
+
+    def add(self, seconds: float) -> None:
+        i = int(seconds / self.resolution_s) if seconds > 0.0 else 0
+        self.counts[min(i, len(self.counts) - 1)] += 1
+        self.n += 1
+        if not seconds <= self.max_s:  # also the first one (max NaN)
+            self.max_s = seconds
+
+    def percentile_s(self, q: float) -> float:
+        """The q-th percentile (0-100), as the upper edge of its bin; above the histogram's range,
+        the largest duration seen."""
+        if self.n == 0:
+            return math.nan
+        rank = max(1, math.ceil(q / 100.0 * self.n))
+        i = int(np.searchsorted(np.cumsum(self.counts), rank))
+        if i >= len(self.counts) - 1:
+            return self.max_s
+        return min((i + 1) * self.resolution_s, self.max_s)
 
 
 @dataclass
 class CycleTiming:
     """Compute time and start lateness of every cycle, summarised at the end."""
 
-    compute_s: list[float] = field(default_factory=list)
-    late_s: list[float] = field(default_factory=list)
+    compute: LatencyHistogram = field(default_factory=LatencyHistogram)
+    late: LatencyHistogram = field(default_factory=LatencyHistogram)
     overruns: int = 0
 
+    @property
+    def cycles(self) -> int:
+        return self.compute.n
+
+    def add(self, compute_s: float, late_s: float) -> None:
+        self.compute.add(compute_s)
+        self.late.add(late_s)
+
     def summary(self) -> dict[str, float]:
-        out: dict[str, float] = {"cycles": float(len(self.compute_s)), "overruns": self.overruns}
-        for name, values in (("compute", self.compute_s), ("jitter", self.late_s)):
-            if values:
-                a = 1e3 * np.asarray(values)
+        out: dict[str, float] = {"cycles": float(self.cycles), "overruns": self.overruns}
+        for name, histogram in (("compute", self.compute), ("jitter", self.late)):
+            if histogram.n:
                 for q, label in ((50, "p50"), (99, "p99"), (99.9, "p99_9")):
-                    out[f"{name}_{label}_ms"] = float(np.percentile(a, q))
-                out[f"{name}_max_ms"] = float(a.max())
+                    out[f"{name}_{label}_ms"] = 1e3 * histogram.percentile_s(q)
+                out[f"{name}_max_ms"] = 1e3 * histogram.max_s
         return out
 
     def report(self) -> str:
@@ -111,11 +151,17 @@ class SessionResult:
     rebias: Rebias | None
 
 
-def _period(samples: list[Sample]) -> float:
-    times = np.array([s.received_s for s in samples])
-    if len(times) < 3:
-        return math.nan
-    return float(np.median(np.diff(times)))
+def _measured(source: Source, samples: list[Sample], counts: list[int]) -> RateCheck:
+    """The rate of the samples the rebias took (with their counts), on the device's own clock
+    where every sample has its time stamp (FSE103: milliseconds, modulo 2**32), else on receipt
+    times."""
+    stamps = [s.device_ms for s in samples]
+    if stamps and all(ms is not None for ms in stamps):
+        steps = np.diff(np.array(stamps, dtype=np.int64)) % 2**32
+        times, clock = 1e-3 * np.concatenate(([0], np.cumsum(steps))), "device time stamps"
+    else:
+        times, clock = np.array([s.received_s for s in samples]), "receipt times"
+    return RateCheck(source.describe(), robust_period(counts, times), source.rate_band_hz, clock)
 
 
 class Runner:
@@ -141,6 +187,8 @@ class Runner:
         self.announce = announce
         self.stop_requested = threading.Event()
         self.timing = CycleTiming()
+        self._pressure = CpuPressure()
+        self._commanded_s = math.inf  # perf_counter of the last command or kick
         self._k = 0
 
     # --- start-up ------------------------------------------------------------------------------
@@ -165,6 +213,7 @@ class Runner:
             raise RunError(f"{self.robot.describe()}: {problem}")
         self.robot.speed_l(np.zeros(6), self.config.robot.acceleration)
         self.robot.kick_watchdog()
+        self._commanded_s = time.perf_counter()
         return state
 
     def rebias(self, pacer: Any) -> Rebias:
@@ -174,6 +223,8 @@ class Runner:
         probe_start = self.probe.mailbox.latest()[1] if self.probe is not None else 0
         ft_samples: list[Sample] = []
         probe_samples: list[Sample] = []
+        ft_counts: list[int] = []  # each sample's count: several may arrive between two cycles
+        probe_counts: list[int] = []
         seen_ft, seen_probe = ft_start, probe_start
         R_BS_sum = np.zeros((3, 3))
         deadline = time.monotonic() + cfg.timeout_s
@@ -193,16 +244,27 @@ class Runner:
             sample, count = self.ft.mailbox.latest()
             if count > seen_ft and sample is not None:  # a sample per count change: the newest
                 ft_samples.append(sample)
+                ft_counts.append(count)
                 R_BS_sum += state.R_BT @ self.config.robot.R_TS
                 seen_ft = count
             if self.probe is not None:
                 probe_sample, probe_count = self.probe.mailbox.latest()
                 if probe_count > seen_probe and probe_sample is not None:
                     probe_samples.append(probe_sample)
+                    probe_counts.append(probe_count)
                     seen_probe = probe_count
         values = np.array([s.values for s in ft_samples])
         if not np.all(np.isfinite(values)):
             raise RunError("rebias refused: the FT-150 sent non-finite values")
+        # the filters are tuned to the packet periods measured here: a rate the device cannot
+        # have (a stall and a burst, another device) is refused, not handed to them
+        rates = [_measured(self.ft, ft_samples, ft_counts)]
+        if self.probe is not None and probe_samples:
+            rates.append(_measured(self.probe, probe_samples, probe_counts))
+        for rate in rates:
+            problem = rate.problem()
+            if problem is not None:
+                raise RunError(f"rebias refused: {problem}")
         U, _, Vt = np.linalg.svd(R_BS_sum / len(ft_samples))
         R_BS = U @ Vt  # the mean orientation, a rotation again
         weight = GravityModel(self.calibration.tool, self.calibration.gravity_B).weight_S(R_BS)
@@ -228,8 +290,8 @@ class Runner:
         return Rebias(
             ft_bias=mean - weight,
             probe_bias=probe_bias,
-            ft_period_s=_period(ft_samples),
-            probe_period_s=_period(probe_samples) if probe_samples else math.nan,
+            ft_period_s=rates[0].period_s,
+            probe_period_s=rates[1].period_s if len(rates) > 1 else math.nan,
             deviation=deviation,
         )
 
@@ -266,6 +328,7 @@ class Runner:
             robot=self.robot.describe(),
             ft=self.ft.describe(),
             probe=self.probe.describe() if self.probe is not None else None,
+            watchdog_s=1.0 / self.config.robot.watchdog_hz,
         )
 
     # --- the loop --------------------------------------------------------------------------------
@@ -280,6 +343,7 @@ class Runner:
             # a filter imports its library when it is built or first stepped (up to a second):
             # imported now, not between two of the watchdog's cycles below
             import_filter_libraries(self.config.estimator)
+
             self.robot.connect()
             for source in sources:
                 source.start()
@@ -316,7 +380,8 @@ class Runner:
             if self.log is not None:
                 self.log.close()
             self.robot.close()
-        return SessionResult(len(self.timing.compute_s), cause, clean, self.timing, rebias)
+            self._pressure.close()
+        return SessionResult(self.timing.cycles, cause, clean, self.timing, rebias)
 
     def _loop(
         self,
@@ -331,6 +396,8 @@ class Runner:
         blocks = ControlBlocks(estimator, controller, self.policy())
         policy = blocks.policy
         overruns_before = pacer.overruns  # the rebias's own are not the loop's
+        pressure = self._pressure  # measured while a stream is stale, to name a starved machine
+        stale = False
         k = 0
         while n_max is None or k < n_max:
             if self.stop_requested.is_set():
@@ -339,6 +406,12 @@ class Runner:
             self.timing.overruns = pacer.overruns - overruns_before
             start = time.perf_counter()
             state = self.robot.state()
+            # the robot's watchdog counts from our last command: past it, the robot has stopped
+            # itself because this process stalled, whatever it reports now
+            starved = starved_cause(policy, k, time.perf_counter() - self._commanded_s)
+            if starved is not None:
+                self._event("stop", starved)
+                return starved, False
             problem = named_problem(self.robot, state)
             if problem is not None:  # the robot stopped itself: nothing to compute
                 self._event("stop", problem)
@@ -361,7 +434,14 @@ class Runner:
                 period,
                 ft_error=self.ft.mailbox.error,
                 probe_error=self.probe.mailbox.error if self.probe is not None else None,
+                overload=pressure.overload() if stale else None,
             )
+            if bool(cycle.verdict.status & _STALE) != stale:  # a window per silence
+                stale = not stale
+                if stale:
+                    pressure.start()
+                else:
+                    pressure.stop()
             for event in cycle.events:
                 self._event(event.name, event.detail)
                 self.announce(event.announcement)
@@ -369,9 +449,9 @@ class Runner:
             if cause is None:
                 self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
                 self.robot.kick_watchdog()
+                self._commanded_s = time.perf_counter()
             compute = time.perf_counter() - start
-            self.timing.compute_s.append(compute)
-            self.timing.late_s.append(late)
+            self.timing.add(compute, late)
             if self.log is not None:
                 self._k = k
                 self.log.record(CycleRecord(k, k * period, cycle, state, ft, probe, compute, late))
@@ -393,6 +473,9 @@ class Runner:
         self._event(
             "parameters", _parameters_json(estimator, controller, rebias, self.robot.period_s)
         )
+
+
+_STALE = Status.STALE_FT | Status.STALE_PROBE
 
 
 def _helper_threads() -> list[threading.Thread]:

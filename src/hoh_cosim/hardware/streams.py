@@ -13,17 +13,18 @@ millisecond counter is kept beside it (`device_ms`) but never mixed with host ti
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hoh_cosim.control.vectors import Vec
 
-__all__ = ["Mailbox", "ReaderThread", "Sample", "StreamStats", "now"]
+__all__ = ["Mailbox", "RateCheck", "ReaderThread", "Sample", "StreamStats", "now", "robust_period"]
 
 
 @dataclass(frozen=True)
@@ -187,6 +188,65 @@ class ReaderThread(threading.Thread):
                 self._halt.wait(self.retry_s)
         self.connected.clear()
         self._close_quietly()
+
+
+def robust_period(counts: Sequence[int], times_s: Sequence[float]) -> float:
+    """A stream's packet period [s] from (sample count, time) pairs, as its sender kept it.
+
+    A sample can reach us late (a stall: the machine busy, a kernel worker starved, a buffer), never
+    early. So the sender's schedule is the line under the points, not through them: the lower
+    convex hull of (count, time), whose edge over the middle count gives the period. A stall
+    followed by a burst, or by a backlog drained one sample per cycle, only lifts points above
+    that line (the median spacing of receipt times took such a drain for a 500 Hz stream; a
+    regression through the points is pulled by it as well). NaN with fewer than 3 points.
+    """
+    n = len(counts)
+    if n < 3 or len(times_s) != n:
+        return math.nan
+    x = np.asarray(counts, dtype=float)
+    y = np.asarray(times_s, dtype=float)
+    if not (np.all(np.isfinite(y)) and np.all(np.diff(x) > 0)):
+        return math.nan
+    hull: list[int] = []  # Andrew's monotone chain, lower half
+    for i in range(n):
+        while len(hull) >= 2:
+            a, b = hull[-2], hull[-1]
+            if (x[b] - x[a]) * (y[i] - y[a]) - (y[b] - y[a]) * (x[i] - x[a]) > 0:
+                break  # a left turn: b stays on the lower hull
+            hull.pop()
+        hull.append(i)
+    middle = 0.5 * (x[0] + x[-1])
+    for a, b in itertools.pairwise(hull):
+        if x[b] >= middle:
+            return float((y[b] - y[a]) / (x[b] - x[a]))
+    return math.nan  # unreachable: the last hull point is the last point
+
+
+@dataclass(frozen=True)
+class RateCheck:
+    """A stream's measured rate against the rates its datasheet (and the seed's rig) allow."""
+
+    name: str
+    period_s: float  # measured; NaN: too few samples to tell (the configured period stands)
+    band_hz: tuple[float, float]
+    clock: str  # what the times were: "device time stamps" or "receipt times"
+
+    @property
+    def rate_hz(self) -> float:
+        return 1.0 / self.period_s if self.period_s > 0 else math.nan
+
+    def problem(self) -> str | None:
+        """Why the rate cannot be handed to the filters, or None (also when unmeasured)."""
+        low, high = self.band_hz
+        if math.isnan(self.period_s):
+            return None
+        if not low <= self.rate_hz <= high:
+            return (
+                f"{self.name} measured at {self.rate_hz:.1f} Hz ({self.clock}), outside the "
+                f"{low:g}-{high:g} Hz its datasheet allows: a stream that stalls and bursts, or "
+                "another device"
+            )
+        return None
 
 
 def now() -> float:
