@@ -28,7 +28,9 @@ from hoh_cosim.errors import InputFileError, RunError
 from hoh_cosim.hardware.session_log import (
     CHANNELS,
     CYCLE_LAYOUT,
+    FLOAT32,
     NONFINITE,
+    RESOLUTION,
     CycleRow,
     Session,
     SessionLog,
@@ -66,6 +68,31 @@ def has_probe(i: int) -> bool:
     return i % 4 != 1
 
 
+def probe_count(i: int) -> int:
+    return 500 + i // 2  # a new probe sample every other row: the rows between repeat it
+
+
+def probe_rows() -> list[int]:
+    """The rows with an /fse103 message: a probe sample, and a new one (its count moved)."""
+    rows, last = [], None
+    for i in range(ROWS):
+        if has_probe(i) and probe_count(i) != last:
+            rows.append(i)
+            last = probe_count(i)
+    return rows
+
+
+def at_resolution(topic: str, name: str, value: float) -> float:
+    """A float as the log writes it: Python's own decimal rounding to the field's decimals, the
+    shortest decimal of its float32 for a float32 field."""
+    decimals = RESOLUTION.get((topic, name))
+    if decimals is None:
+        return float(value)
+    if decimals == FLOAT32:
+        return float(str(np.float32(value)))
+    return round(float(value), int(decimals)) + 0.0
+
+
 def kind_of(topic: str, name: str) -> str:
     for t, n, _, kind in CYCLE_LAYOUT:
         if (t, n) == (topic, name):
@@ -80,7 +107,7 @@ def row_values(i: int) -> dict[str, Any]:
         "/robot.robot_mode": 7,
         "/robot.safety_mode": 1 + i % 3,
         "/ft150.count": 1000 + i,
-        "/fse103.count": 500 + i // 2,
+        "/fse103.count": probe_count(i),
         "/fse103.device_ms": -1 if i % 5 == 0 else 123456 + 10 * i,
         "/command.status": STATUSES[i % len(STATUSES)][0],
     }
@@ -110,18 +137,21 @@ def row_values(i: int) -> dict[str, Any]:
 
 
 def expected_messages(i: int) -> dict[str, dict[str, Any]]:
-    """Row i as `read_session` gives its messages back: NaN as NaN, /ft150 and /fse103 only when
-    present (compare them with `same`: NaN is not equal to itself)."""
+    """Row i as `read_session` gives its messages back: NaN as NaN, each float at its field's
+    resolution, /ft150 and /fse103 only when a new sample is there (compare them with `same`: NaN
+    is not equal to itself)."""
     values = row_values(i)
     out: dict[str, dict[str, Any]] = {}
     for topic, name, _, _ in CYCLE_LAYOUT:
-        if (topic == "/ft150" and not has_ft(i)) or (topic == "/fse103" and not has_probe(i)):
+        if (topic == "/ft150" and not has_ft(i)) or (topic == "/fse103" and i not in probe_rows()):
             continue
-        message = out.setdefault(topic, {"k": i, "t": i * DT})
+        message = out.setdefault(topic, {"k": i, "t": round(i * DT, 9)})
         value = values[f"{topic}.{name}"]
         if isinstance(value, np.ndarray):
-            message[name] = [float(x) for x in value]
-        else:  # integers and booleans too
+            message[name] = [at_resolution(topic, name, x) for x in value]
+        elif isinstance(value, float):
+            message[name] = at_resolution(topic, name, value)
+        else:  # integers and booleans
             message[name] = value
     out["/command"]["status_text"] = STATUSES[i % len(STATUSES)][1]
     return out
@@ -241,12 +271,13 @@ def test_every_cycle_channel_has_a_message_per_row_with_k_and_t(session):
     for topic in ("/robot", "/estimate", "/command", "/timing"):
         messages = session.messages[topic]
         assert [m["k"] for m in messages] == list(range(ROWS)), topic
-        assert [m["t"] for m in messages] == [i * DT for i in range(ROWS)], topic
+        assert [m["t"] for m in messages] == [round(i * DT, 9) for i in range(ROWS)], topic
 
 
 def test_sensor_channels_only_for_rows_that_have_a_sample(session):
     assert [m["k"] for m in session.messages["/ft150"]] == [i for i in range(ROWS) if has_ft(i)]
-    assert [m["k"] for m in session.messages["/fse103"]] == [i for i in range(ROWS) if has_probe(i)]
+    assert [m["k"] for m in session.messages["/fse103"]] == probe_rows()
+    assert len(probe_rows()) < len([i for i in range(ROWS) if has_probe(i)])  # repeats left out
     assert 0 < len(session.messages["/ft150"]) < ROWS
     assert 0 < len(session.messages["/fse103"]) < ROWS
 
@@ -255,8 +286,13 @@ def test_a_non_finite_value_is_text_in_the_file_and_nan_when_read(session, writt
     ft_rows = [i for i in range(ROWS) if has_ft(i)]
     wrench = session.series("/ft150", "wrench_S")
     assert wrench.shape == (len(ft_rows), 6)
-    expected = np.array([row_values(i)["/ft150.wrench_S"] for i in ft_rows])
-    np.testing.assert_array_equal(wrench, expected)  # NaN where NaN, exact elsewhere
+    expected = np.array(
+        [
+            [at_resolution("/ft150", "wrench_S", x) for x in row_values(i)["/ft150.wrench_S"]]
+            for i in ft_rows
+        ]
+    )
+    np.testing.assert_array_equal(wrench, expected)  # NaN where NaN, at its resolution elsewhere
     assert np.count_nonzero(np.isnan(wrench)) == 1
     assert np.isnan(session.messages["/ft150"][ft_rows.index(5)]["wrench_S"][1])
     assert np.isnan(session.messages["/estimate"][6]["F_hand_B"][2])
@@ -270,12 +306,14 @@ def test_a_non_finite_value_is_text_in_the_file_and_nan_when_read(session, writt
     ft = raw[(5, "/ft150")]
     assert "wrench_S" not in ft
     assert ft[NONFINITE]["wrench_S"][1] == "nan"
-    assert float(ft[NONFINITE]["wrench_S"][0]) == row_values(5)["/ft150.wrench_S"][0]
+    assert float(ft[NONFINITE]["wrench_S"][0]) == at_resolution(
+        "/ft150", "wrench_S", row_values(5)["/ft150.wrench_S"][0]
+    )
     assert raw[(9, "/estimate")][NONFINITE] == {"ft_age": "nan"}
     assert NONFINITE not in raw[(8, "/estimate")]
     np.testing.assert_array_equal(
         session.series("/command", "sent_B")[13],
-        row_values(13)["/command.sent_B"],
+        [at_resolution("/command", "sent_B", x) for x in row_values(13)["/command.sent_B"]],
     )
 
 
@@ -285,7 +323,7 @@ def test_series_of_integers_and_booleans(session):
     )
     np.testing.assert_array_equal(
         session.series("/fse103", "device_ms"),
-        [-1 if i % 5 == 0 else 123456 + 10 * i for i in range(ROWS) if has_probe(i)],
+        [-1 if i % 5 == 0 else 123456 + 10 * i for i in probe_rows()],
     )
     assert session.series("/nothing", "x").shape == (0,)
 
@@ -300,7 +338,7 @@ def test_the_schemas_refuse_what_they_should():
     from jsonschema import Draft202012Validator
 
     robot = Draft202012Validator(channel_schema("/robot"))
-    good = {"k": 1, "t": 0.002, "p_BT_B": [0.1, 0.2, 0.3], "R_BT": [1.0] * 9,
+    good = {"k": 1, "t": 0.002, "p_BT_B": [0.1, 0.2, 0.3], "rotvec_BT": [1.0] * 3,
             "twist_B": [0.0] * 6, "robot_mode": 7, "safety_mode": 1, "protective_stop": False,
             "emergency_stop": False, "program_running": True}  # fmt: skip
     assert robot.is_valid(good)

@@ -1,10 +1,12 @@
 """`hoh-cosim replay LOG.mcap [--set ...]`: the estimator and controller again, on recorded data.
 
 A session log holds, for every cycle, exactly what the estimator and the controller were given (the
-raw FT-150 and FSE103 samples with their counters, the robot's pose) and the parameters they ran
-with. Replaying feeds the same inputs to fresh blocks with other settings and compares the new
-estimates and commands with the recorded ones: that is how one tunes on real data. Without `--set`
-the replay reproduces the recording exactly (a test holds it to that).
+raw FT-150 and FSE103 samples with their counters, the robot's pose at the resolution the loop
+itself works with) and the parameters they ran with. Replaying feeds the same inputs to fresh blocks
+with other settings and compares the new estimates and commands with the recorded ones: that is how
+one tunes on real data. The log holds estimates and commands at a resolution (1 mN, 0.1 mm/s; see
+`session_log.RESOLUTION`), and the replay's are rounded alike before the comparison: without
+`--set` the replay reproduces the recording exactly (a test holds it to that).
 """
 
 from __future__ import annotations
@@ -21,9 +23,10 @@ import numpy as np
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.cycle import ControlBlocks, Reading, control_cycle
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.supervisor import SessionPolicy
 from hoh_cosim.errors import ConfigError, InputFileError
-from hoh_cosim.hardware.session_log import Session, read_session
+from hoh_cosim.hardware.session_log import FLOAT32, RESOLUTION, Session, read_session
 from hoh_cosim.params import override, with_values
 from hoh_cosim.yamlfile import parse_value
 
@@ -78,6 +81,36 @@ def _by_cycle(session: Session, topic: str) -> dict[int, dict[str, Any]]:
     return {m["k"]: m for m in session.messages.get(topic, [])}
 
 
+def _latest_by_cycle(session: Session, topic: str, cycles: list[int]) -> dict[int, dict[str, Any]]:
+    """A sensor's message for each cycle: the latest at or before it (a sensor's channel has a
+    message when a new sample came; older logs have one every cycle, which this reads alike)."""
+    messages = sorted(session.messages.get(topic, []), key=lambda m: m["k"])
+    out: dict[int, dict[str, Any]] = {}
+    i, latest = 0, None
+    for k in cycles:
+        while i < len(messages) and messages[i]["k"] <= k:
+            latest = messages[i]
+            i += 1
+        if latest is not None:
+            out[k] = latest
+    return out
+
+
+def _probe_force(values: list[Any], resolved: bool) -> np.ndarray:
+    """The FSE103's force as the loop had it: float32 on the wire, logged as its shortest decimal."""
+    force = _vector(values)
+    if resolved and RESOLUTION.get(("/fse103", "force_P")) == FLOAT32:
+        return force.astype(np.float32).astype(np.float64)
+    return force
+
+
+def _orientation(robot: dict[str, Any]) -> np.ndarray:
+    """R_BT of a /robot message: from its rotation vector (older logs: the matrix, row by row)."""
+    if "rotvec_BT" in robot:
+        return rotvec_to_matrix(_vector(robot["rotvec_BT"]))
+    return _vector(robot["R_BT"]).reshape(3, 3)
+
+
 def _vector(values: list[Any]) -> np.ndarray:
     return np.array([math.nan if x is None else x for x in values], dtype=float)
 
@@ -98,11 +131,22 @@ def replay(path: str | Path, overrides: Sequence[str] = ()) -> ReplayResult:
             params[block], name, parse_value(text, value_text), f"--set {block}"
         )
     R_TS = np.asarray(session.metadata.get("R_TS", np.eye(3)), dtype=float)
-    robot, ft, probe = (_by_cycle(session, t) for t in ("/robot", "/ft150", "/fse103"))
+    robot = _by_cycle(session, "/robot")
     estimates, commands = _by_cycle(session, "/estimate"), _by_cycle(session, "/command")
     cycles = sorted(k for k in commands if k in robot and k in estimates)
     if not cycles:
         raise InputFileError(session.path, "/command", "no control cycle was recorded")
+    ft, probe = (_latest_by_cycle(session, t, cycles) for t in ("/ft150", "/fse103"))
+    # a log that holds its numbers at a resolution (its orientation as a rotation vector) is
+    # compared at that resolution: a replay that reproduces the session differs by nothing
+    resolved = "rotvec_BT" in robot[cycles[0]]
+
+    def at_resolution(values: np.ndarray, topic: str, name: str) -> np.ndarray:
+        decimals = RESOLUTION.get((topic, name))
+        if not resolved or not isinstance(decimals, int):
+            return values.copy()
+        return np.round(values, decimals) + 0.0
+
     blocks = ControlBlocks(
         Estimator(params["estimator"]),
         HandGuidingController(params["controller"]),
@@ -116,10 +160,10 @@ def replay(path: str | Path, overrides: Sequence[str] = ()) -> ReplayResult:
         t = k * period
         reading = Reading(
             _vector(r["p_BT_B"]),
-            _vector(r["R_BT"]).reshape(3, 3) @ R_TS,
+            _orientation(r) @ R_TS,
             _vector(f["wrench_S"]) if f else None,
             int(f["count"]) if f else 0,
-            _vector(pr["force_P"]) if pr else None,
+            _probe_force(pr["force_P"], resolved) if pr else None,
             int(pr["count"]) if pr else 0,
         )
         cycle = control_cycle(blocks, reading, t, period)
@@ -127,8 +171,8 @@ def replay(path: str | Path, overrides: Sequence[str] = ()) -> ReplayResult:
         old["F_hand_B"].append(_vector(estimates[k]["F_hand_B"]))
         old["twist_B"].append(_vector(commands[k]["twist_B"]))
         old["status"].append(int(commands[k]["status"]))
-        new["F_hand_B"].append(cycle.estimate["F_hand_B"].copy())
-        new["twist_B"].append(cycle.command["twist_B"].copy())
+        new["F_hand_B"].append(at_resolution(cycle.estimate["F_hand_B"], "/estimate", "F_hand_B"))
+        new["twist_B"].append(at_resolution(cycle.command["twist_B"], "/command", "twist_B"))
         new["status"].append(int(cycle.command["status"][0]))
     return ReplayResult(
         session,

@@ -57,6 +57,7 @@ class RobotState:
     emergency_stop: bool
     program_running: bool
     timestamp_s: float  # the controller's own clock
+    rotvec_BT: Vec3 | None = None  # R_BT as RTDE gives it, where the robot gives it so
 
     def problem(self) -> str | None:
         """Why the robot cannot be commanded now, or None."""
@@ -290,6 +291,7 @@ class RtdeRobot:
             emergency_stop=bool(receive.isEmergencyStopped()),
             program_running=bool(control.isProgramRunning()),
             timestamp_s=timestamp,
+            rotvec_BT=np.array(pose[3:], dtype=float),
         )
 
     def speed_l(self, twist_B: Vec, acceleration: float) -> None:

@@ -47,7 +47,7 @@ from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.config import HardwareConfig
 from hoh_cosim.hardware.pressure import CpuPressure
 from hoh_cosim.hardware.robot import Robot, RobotState, named_problem
-from hoh_cosim.hardware.session_log import CycleRecord, SessionLog
+from hoh_cosim.hardware.session_log import CycleRecord, SessionLog, at_log_resolution
 from hoh_cosim.hardware.streams import Mailbox, RateCheck, ReaderThread, Sample, robust_period
 from hoh_cosim.params import leaves
 
@@ -405,7 +405,7 @@ class Runner:
             late = pacer.wait()
             self.timing.overruns = pacer.overruns - overruns_before
             start = time.perf_counter()
-            state = self.robot.state()
+            state = at_log_resolution(self.robot.state())  # what the log can hold: replayable
             # the robot's watchdog counts from our last command: past it, the robot has stopped
             # itself because this process stalled, whatever it reports now
             starved = starved_cause(policy, k, time.perf_counter() - self._commanded_s)

@@ -4,9 +4,10 @@ Channels carry JSON messages with a JSON schema each (`channel_schema`: every fi
 ones always present required, nothing else allowed; a non-finite value as text under `NONFINITE`),
 so the file opens in Foxglove and in the `mcap` Python package alike:
 
-    /robot      p_BT_B, R_BT (row by row), twist_B, robot and safety mode, stops, program running
-    /ft150      the latest raw wrench in S, how many samples so far, its receipt time
-    /fse103     the latest raw probe force in P, how many samples so far, receipt and device times
+    /robot      p_BT_B, rotvec_BT (the orientation as UR's rotation vector), twist_B, robot and
+                safety mode, stops, program running
+    /ft150      a new raw wrench in S, how many samples so far, its receipt time
+    /fse103     a new raw probe force in P, how many samples so far, receipt and device times
     /estimate   the estimator's outputs
     /command    the controller's outputs and the twist sent, with the status flags' names
     /timing     the cycle's compute time and how late it started
@@ -23,6 +24,16 @@ every `flush_s` seconds, so a killed runner loses at most that much. (A writer t
 first: its work, done under the interpreter's lock, delayed the 500 Hz loop by up to 8 ms every
 second.) If the writer falls a whole ring behind, the rows it missed are reported as an event.
 `read_session` reads a complete file or one that was cut off.
+
+Size (a shift of 8 hours must fit; see docs/decisions.md for the measurements). Every number is
+written at a stated resolution (`RESOLUTION`, decimals), no finer than what produced it: the
+FT-150's wrench as its daemon sends it (forces to 0.01 N, torques to 0.001 N·m: exact), the FSE103's
+force as the float32 it is on the wire (its shortest decimal: exact), the robot's pose at 10 µm and
+1e-5 rad, which the loop itself works with (`at_log_resolution`), so a replay of the log feeds the
+blocks exactly what the session fed them; the hand's force to the FT-150's 0.01 N, commands to
+0.1 mm/s. A sensor's channel has a message when the sensor sent a new sample (its count moved),
+not every cycle: the cycle's sample is the latest message at or before it. Chunks are zstd-compressed; there is no
+per-message index (it alone was 130 MB an hour): readers find a time through the chunk index.
 """
 
 from __future__ import annotations
@@ -41,6 +52,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hoh_cosim import __version__
+from hoh_cosim.control.frames import matrix_to_rotvec, rotvec_to_matrix
 from hoh_cosim.errors import InputFileError, RunError
 
 if TYPE_CHECKING:  # the writer process imports this module: it needs none of them
@@ -51,11 +63,15 @@ if TYPE_CHECKING:  # the writer process imports this module: it needs none of th
 __all__ = [
     "CHANNELS",
     "CYCLE_LAYOUT",
+    "FLOAT32",
     "NONFINITE",
+    "RESOLUTION",
+    "ZSTD_LEVEL",
     "CycleRecord",
     "CycleRow",
     "Session",
     "SessionLog",
+    "at_log_resolution",
     "channel_schema",
     "decode_message",
     "read_session",
@@ -70,7 +86,7 @@ _STR = {"type": "string"}
 # (topic, field, size, JSON type): the cycle row, in order
 CYCLE_LAYOUT: tuple[tuple[str, str, int, dict[str, Any]], ...] = (
     ("/robot", "p_BT_B", 3, _VECTOR),
-    ("/robot", "R_BT", 9, _VECTOR),
+    ("/robot", "rotvec_BT", 3, _VECTOR),
     ("/robot", "twist_B", 6, _VECTOR),
     ("/robot", "robot_mode", 1, _INT),
     ("/robot", "safety_mode", 1, _INT),
@@ -104,6 +120,43 @@ CYCLE_LAYOUT: tuple[tuple[str, str, int, dict[str, Any]], ...] = (
     ("/timing", "compute_s", 1, _NUM),
     ("/timing", "late_s", 1, _NUM),
 )
+FLOAT32 = "float32"
+"""A `RESOLUTION` for values that are float32 on the wire: their shortest decimal, exact."""
+
+RESOLUTION: dict[tuple[str, str], int | str] = {
+    ("/robot", "p_BT_B"): 5,  # 10 µm: a tenth of the UR5's repeatability
+    ("/robot", "rotvec_BT"): 5,  # 1e-5 rad
+    ("/robot", "twist_B"): 4,  # 0.1 mm/s, 1e-4 rad/s: logged, not fed to the blocks
+    ("/ft150", "wrench_S"): 3,  # the daemon's 2 and 3 decimals: exact
+    ("/ft150", "received_s"): 5,  # 10 µs
+    ("/fse103", "force_P"): FLOAT32,
+    ("/fse103", "received_s"): 5,
+    ("/estimate", "F_hand_B"): 2,  # the FT-150's resolution: 0.01 N, 0.001 N·m
+    ("/estimate", "tau_hand_B"): 3,
+    ("/estimate", "F_probe_B"): 3,  # 1 mN: the probe sensor's forces
+    ("/estimate", "F_hand_meas_B"): 2,
+    ("/estimate", "ft_age"): 6,
+    ("/estimate", "probe_age"): 6,
+    ("/estimate", "ready"): 3,
+    ("/estimate", "rejected_packets"): 0,
+    ("/estimate", "F_probe_meas_P"): 3,
+    ("/estimate", "F_probe_corr_P"): 3,
+    ("/estimate", "probe_check"): 3,
+    ("/estimate", "probe_mismatch"): 3,
+    ("/estimate", "probe_drift"): 3,
+    ("/command", "twist_B"): 4,  # 0.1 mm/s, 1e-4 rad/s, as the robot's measured twist
+    ("/command", "twist_law_B"): 4,
+    ("/command", "sent_B"): 4,
+    ("/timing", "compute_s"): 5,  # 10 µs (the runner's own histogram reports to 1 µs)
+    ("/timing", "late_s"): 5,
+}
+"""Decimals each float field is written with (see the module's docstring); `t` to 1 ns."""
+
+ZSTD_LEVEL = 9
+"""The chunks' zstd level, chosen by measurement (docs/decisions.md): level 3, the mcap writer's own,
+writes a third more; 12 and 15 gain nothing over 9; 19 a sixth less for 30 times the time (a fifth
+of a core, beside the loop)."""
+
 # k, t, whether an FT-150 sample and a probe sample exist yet, then the layout
 _HEAD = 4
 ROW_SIZE = _HEAD + sum(size for _, _, size, _ in CYCLE_LAYOUT)
@@ -162,7 +215,10 @@ class CycleRecord:
         reading, verdict = self.cycle.reading, self.cycle.verdict
         row.start(self.k, self.t, ft is not None, probe is not None)
         row.set("/robot.p_BT_B", state.p_BT_B)
-        row.set("/robot.R_BT", state.R_BT.reshape(9))
+        row.set(
+            "/robot.rotvec_BT",
+            state.rotvec_BT if state.rotvec_BT is not None else matrix_to_rotvec(state.R_BT),
+        )
         row.set("/robot.twist_B", state.twist_B)
         row.set("/robot.robot_mode", state.robot_mode)
         row.set("/robot.safety_mode", state.safety_mode)
@@ -239,22 +295,48 @@ def _number(x: float, kind: dict[str, Any]) -> Any:
     return float(x)
 
 
-def _messages(row: np.ndarray) -> list[tuple[str, dict[str, Any]]]:
-    """A cycle row as the messages of its channels."""
-    k, t, has_ft, has_probe = int(row[0]), float(row[1]), row[2] > 0.5, row[3] > 0.5
+def _rounded(values: np.ndarray, decimals: int | str | None) -> list[float]:
+    if decimals is None:
+        return values.tolist()
+    if decimals == FLOAT32:  # NaN and infinities too: str gives 'nan', 'inf'
+        return [float(str(x)) for x in values.astype(np.float32)]
+    return (np.round(values, int(decimals)) + 0.0).tolist()  # + 0.0: no "-0.0"
+
+
+def _messages(
+    row: np.ndarray, counts: dict[str, int] | None = None
+) -> list[tuple[str, dict[str, Any]]]:
+    """A cycle row as the messages of its channels, each number at its `RESOLUTION`. With
+    `counts` (the sensor channels' last written sample counts, updated here), a sensor's message
+    only when its sample is new."""
+    k, t, has_ft, has_probe = int(row[0]), round(float(row[1]), 9), row[2] > 0.5, row[3] > 0.5
     out: dict[str, dict[str, Any]] = {}
     at = _HEAD
+    skip: set[str] = set()
+    if not has_ft:
+        skip.add("/ft150")
+    if not has_probe:
+        skip.add("/fse103")
     for topic, name, size, kind in CYCLE_LAYOUT:
         values = row[at : at + size]
         at += size
-        if (topic == "/ft150" and not has_ft) or (topic == "/fse103" and not has_probe):
+        if topic in skip:
             continue
+        if counts is not None and name == "count" and topic in ("/ft150", "/fse103"):
+            count = int(values[0])
+            if counts.get(topic) == count:
+                skip.add(topic)
+                out.pop(topic, None)
+                continue
+            counts[topic] = count
         message = out.setdefault(topic, {"k": k, "t": t})
         if (kind is _VECTOR or kind is _NUM) and not np.all(np.isfinite(values)):
-            text = [_text(x) for x in values]
+            text = [_text(x) for x in _rounded(values, RESOLUTION.get((topic, name)))]
             message.setdefault(NONFINITE, {})[name] = text if kind is _VECTOR else text[0]
         elif kind is _VECTOR:
-            message[name] = values.tolist()
+            message[name] = _rounded(values, RESOLUTION.get((topic, name)))
+        elif kind is _NUM:
+            message[name] = _rounded(values, RESOLUTION.get((topic, name)))[0]
         else:
             message[name] = _number(values[0], kind)
     if "/command" in out:
@@ -262,6 +344,25 @@ def _messages(row: np.ndarray) -> list[tuple[str, dict[str, Any]]]:
 
         out["/command"]["status_text"] = Status(out["/command"]["status"]).describe()
     return list(out.items())
+
+
+def at_log_resolution(state: RobotState) -> RobotState:
+    """The robot's state as the log holds it: the position to `RESOLUTION`'s decimals, the
+    orientation through its rotation vector at its decimals (the robot's own where it gives one:
+    converting a matrix costs 50 µs). The loop works with this state, so that a replay of the log
+    feeds the blocks exactly what the session fed them."""
+    import dataclasses
+
+    p_decimals = int(RESOLUTION["/robot", "p_BT_B"])
+    r_decimals = int(RESOLUTION["/robot", "rotvec_BT"])
+    rotvec = state.rotvec_BT if state.rotvec_BT is not None else matrix_to_rotvec(state.R_BT)
+    rotvec = np.round(rotvec, r_decimals) + 0.0
+    return dataclasses.replace(
+        state,
+        p_BT_B=np.round(state.p_BT_B, p_decimals) + 0.0,
+        R_BT=rotvec_to_matrix(rotvec),
+        rotvec_BT=rotvec,
+    )
 
 
 def _jsonable(value: Any) -> Any:
@@ -276,6 +377,20 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     return value
+
+
+class _LevelledZstd:
+    """What mcap's writer uses of the `zstandard` module, at a chosen level."""
+
+    def __init__(self, module: Any, level: int) -> None:
+        self._module = module
+        self._compressor = module.ZstdCompressor(level=level)
+
+    def compress(self, data: bytes) -> bytes:
+        return self._compressor.compress(data)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._module, name)
 
 
 def _writer_main(
@@ -296,7 +411,14 @@ def _writer_main(
 
     parent = os.getppid()
 
-    from mcap.writer import Writer
+    import mcap.writer
+    import zstandard
+    from mcap.writer import CompressionType, IndexType, Writer
+
+    # mcap's writer compresses each chunk with zstandard's module-level `compress`, at level 3, and
+    # has no setting for the level: give it a compressor at ours (what a reader decodes is the
+    # same zstd either way)
+    mcap.writer.zstandard = _LevelledZstd(zstandard, ZSTD_LEVEL)  # type: ignore[attr-defined]
 
     with contextlib.suppress(OSError):  # the loop comes first: the log may lag, it has a ring
         os.nice(5)
@@ -308,7 +430,11 @@ def _writer_main(
     replies.put("ready")
     rows = np.frombuffer(ring, dtype=np.float64).reshape(capacity, ROW_SIZE)
     with stream:
-        writer = Writer(stream)
+        writer = Writer(
+            stream,
+            compression=CompressionType.ZSTD,
+            index_types=IndexType.ALL & ~IndexType.MESSAGE,
+        )
         writer.start(profile="", library=f"hoh-cosim {__version__}")
         channels = {}
         for topic in CHANNELS:
@@ -341,6 +467,7 @@ def _writer_main(
             add("/events", 0.0, {"k": first, "t": 0.0, "event": "log_overflow", "detail": detail})
 
         done, last_flush = 0, time.monotonic()
+        counts: dict[str, int] = {}  # the sensor channels' last written sample counts
         finishing = False
         while True:
             finishing = finishing or stop.is_set() or os.getppid() != parent
@@ -356,7 +483,7 @@ def _writer_main(
             if intact > done:
                 overflow(done, intact - done)
             for row in block[intact - first :]:
-                for topic, message in _messages(row):
+                for topic, message in _messages(row, counts):
                     add(topic, float(row[1]), message)
             done = head
             drain_events()

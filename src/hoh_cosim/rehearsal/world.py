@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from hoh_cosim.control.frames import matrix_to_rotvec
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pacer, RobotState
@@ -56,8 +57,9 @@ WORLD_DT = 1e-3
 
 # shared memory: [sequence, values...], written under a sequence lock (no lock a reader could
 # wait on: the runner must never wait for another process)
-# p, R, twist, [mode, safety, protective, emergency, program, time], q, qd, the TCP's wrench
-_STATE = 3 + 9 + 6 + 6 + 6 + 6 + 6
+# p, R, twist, [mode, safety, protective, emergency, program, time], q, qd, the TCP's wrench,
+# the orientation as a rotation vector (as RTDE gives it; computed here, not in the runner's loop)
+_STATE = 3 + 9 + 6 + 6 + 6 + 6 + 6 + 3
 _COMMAND = 6 + 4  # twist, [acceleration, kick time, stop, sequence]
 
 
@@ -255,7 +257,16 @@ class _World:
         ]
         self.state.write(
             np.concatenate(
-                [o["p_BT_B"], o["R_BT"], o["twist_B"], flags, o["q"], o["qd"], self._tcp_wrench()]
+                [
+                    o["p_BT_B"],
+                    o["R_BT"],
+                    o["twist_B"],
+                    flags,
+                    o["q"],
+                    o["qd"],
+                    self._tcp_wrench(),
+                    matrix_to_rotvec(o["R_BT"]),
+                ]
             )
         )
 
@@ -424,6 +435,7 @@ class SimulatedRobot:
             emergency_stop=bool(s[21]),
             program_running=bool(s[22]),
             timestamp_s=float(s[23]),
+            rotvec_BT=s[42:45],
         )
 
     def _write(self, twist: Vec, acceleration: float, *, stop: bool) -> None:
