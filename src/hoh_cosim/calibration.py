@@ -26,6 +26,7 @@ from hoh_cosim.errors import InputFileError
 __all__ = [
     "CALIBRATION_FORMAT",
     "POSE_COLUMNS",
+    "POSE_VALUE_LIMIT",
     "calibration_to_dict",
     "poses_csv_text",
     "read_calibration",
@@ -38,6 +39,10 @@ __all__ = [
 POSE_COLUMNS = ("rx", "ry", "rz", "fx", "fy", "fz", "tx", "ty", "tz")
 WRENCH_COMPONENTS = ("fx", "fy", "fz", "tx", "ty", "tz")
 CALIBRATION_FORMAT = "hoh-cosim gravity calibration"
+POSE_VALUE_LIMIT = 1e6
+"""The largest magnitude of a POSES.csv value. A rotation vector is an angle of a few radians and
+no F/T sensor reads a million N or N·m: a larger number is a mistake (a unit, a column), and the
+rotation or the least-squares sums of one beyond 1e154 overflow."""
 CALIBRATION_VERSION = 1
 
 
@@ -50,7 +55,11 @@ def read_poses_csv(path: str | os.PathLike[str]) -> tuple[Vec, Vec]:
         raise InputFileError(path, "", "no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputFileError(path, "", f"cannot read: {exc}") from None
-    rows = list(csv.reader(text.splitlines()))
+    reader = csv.reader(text.splitlines())
+    try:
+        rows = list(reader)
+    except csv.Error as exc:  # a field longer than the csv module's limit (128 KiB)
+        raise InputFileError(path, f"line {reader.line_num}", f"not CSV: {exc}") from None
     if not rows or not any(cell.strip() for cell in rows[0]):
         raise InputFileError(
             path, "line 1", f"expected the header {','.join(POSE_COLUMNS)}, got an empty line"
@@ -91,6 +100,12 @@ def read_poses_csv(path: str | os.PathLike[str]) -> tuple[Vec, Vec]:
                     path,
                     f"{where}, column {column}",
                     f"expected a finite number, got {cell.strip()!r}",
+                )
+            if abs(x) > POSE_VALUE_LIMIT:
+                raise InputFileError(
+                    path,
+                    f"{where}, column {column}",
+                    f"expected a number within ±{POSE_VALUE_LIMIT:g}, got {cell.strip()!r}",
                 )
             numbers.append(x)
         values.append(numbers)
@@ -189,7 +204,7 @@ def _vector(path: Path, data: dict[str, Any], key: str, size: int) -> Vec:
         raise InputFileError(path, key, f"expected a list of {size} numbers, got {got}")
     try:
         out = np.array([float(x) for x in value])
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond a float
         raise InputFileError(path, key, f"expected numbers, got {value!r}") from None
     if not np.all(np.isfinite(out)):
         raise InputFileError(path, key, f"expected finite numbers, got {value!r}")
@@ -198,9 +213,16 @@ def _vector(path: Path, data: dict[str, Any], key: str, size: int) -> Vec:
 
 def _number(path: Path, data: dict[str, Any], key: str) -> float:
     value = data.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value):
         raise InputFileError(path, key, f"expected a finite number, got {value!r}")
     return float(value)
+
+
+def _finite(value: float) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer beyond the largest float
+        return False
 
 
 def read_calibration(path: str | os.PathLike[str]) -> GravityCalibration:
@@ -214,6 +236,12 @@ def read_calibration(path: str | os.PathLike[str]) -> GravityCalibration:
         raise InputFileError(
             path, f"line {exc.lineno}, column {exc.colno}", f"not valid JSON: {exc.msg}"
         ) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(path, "", f"cannot read: {exc}") from None
+    except RecursionError:  # the json module parses nested arrays and objects by recursion
+        raise InputFileError(path, "", "not valid JSON: nested too deeply") from None
+    except ValueError as exc:  # a number of more digits than Python converts (4300)
+        raise InputFileError(path, "", f"not valid JSON: {exc}") from None
     if not isinstance(data, dict) or data.get("format") != CALIBRATION_FORMAT:
         raise InputFileError(
             path,

@@ -287,7 +287,9 @@ def load_scenario(
         raise w.error("metrics", f"expected one of {', '.join(METRIC_SETS)}, got {metrics!r}")
     record_every = w.integer(raw.get("record_every", 1), "record_every", low=1)
 
-    raw_components = w.mapping(raw["components"], list(raw["components"] or {}), "components")
+    components_raw = raw["components"]
+    names = list(components_raw) if isinstance(components_raw, Mapping) else []
+    raw_components = w.mapping(components_raw, names, "components")
     if not raw_components:
         raise w.error("components", "expected at least one component")
     components = {n: _component(n, c, scenario_seed, w) for n, c in raw_components.items()}
@@ -408,7 +410,10 @@ def _share_sensors(
             sensors = SensorSetup.shared(estimator.params, controller.params, names)
         except ConfigError as exc:
             raise w.error("", str(exc)) from None
-        _, params = sensors.apply(estimator.params, controller.params)
+        try:  # the controller's parameters are checked again as they are rebuilt
+            _, params = sensors.apply(estimator.params, controller.params)
+        except ConfigError as exc:
+            raise w.error(names[1], str(exc)) from None
         components[dst] = dataclasses.replace(controller, params=params)
 
 

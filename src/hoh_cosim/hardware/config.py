@@ -234,13 +234,14 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConf
         )
     try:
         sensors = SensorSetup.shared(params["estimator"], params["controller"])
+        if probe_config is None:  # no probe sensor: no compensation, fixture or contact limits
+            sensors = dataclasses.replace(sensors, use_probe=False)
+        # the blocks' parameters are checked again as they are rebuilt with the rig's sensors
+        params["estimator"], params["controller"] = sensors.apply(
+            params["estimator"], params["controller"]
+        )
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
-    if probe_config is None:  # no probe sensor: no compensation, fixture or contact limits
-        sensors = dataclasses.replace(sensors, use_probe=False)
-    params["estimator"], params["controller"] = sensors.apply(
-        params["estimator"], params["controller"]
-    )
     return HardwareConfig(
         path,
         robot_config,

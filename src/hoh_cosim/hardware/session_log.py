@@ -623,10 +623,12 @@ def decode_message(message: dict[str, Any]) -> dict[str, Any]:
 
 def read_session(path: str | Path) -> Session:
     """Every message of a session log; a file cut off by a killed process is read up to the cut
-    (`complete` is then False)."""
+    (`complete` is then False), and so is a damaged one: up to the first record that cannot be
+    read, or whose chunk's CRC does not match, so that no damaged message is taken as data."""
     from mcap.exceptions import McapError
     from mcap.records import Channel, Footer, Message, Metadata
     from mcap.stream_reader import StreamReader
+    from zstandard import ZstdError  # mcap's decompressor for its chunks (lz4's raise RuntimeError)
 
     path = Path(path)
     try:
@@ -637,19 +639,31 @@ def read_session(path: str | Path) -> Session:
     topics: dict[int, str] = {}
     with stream:
         try:
-            for record in StreamReader(stream).records:
+            for record in StreamReader(stream, validate_crcs=True).records:
                 if isinstance(record, Channel):
                     topics[record.id] = record.topic
                 elif isinstance(record, Message):
                     topic = topics.get(record.channel_id)
                     if topic is not None:
-                        message = decode_message(json.loads(record.data))
-                        session.messages.setdefault(topic, []).append(message)
+                        message = json.loads(record.data)
+                        if not isinstance(message, dict):
+                            raise ValueError(f"a {topic} message that is not a JSON object")
+                        session.messages.setdefault(topic, []).append(decode_message(message))
                 elif isinstance(record, Metadata) and record.name == "session":
                     session.metadata = {k: json.loads(v) for k, v in record.metadata.items()}
                 elif isinstance(record, Footer):
                     session.complete = True
-        except (McapError, ValueError, struct.error) as exc:  # cut off, or not MCAP at all
+        # cut off, damaged or not MCAP at all; a damaged length can ask for more memory than
+        # there is (MemoryError) or than an index holds (OverflowError)
+        except (
+            McapError,
+            ZstdError,
+            RuntimeError,
+            ValueError,
+            struct.error,
+            OverflowError,
+            MemoryError,
+        ) as exc:
             # A writer killed before its first chunk leaves the header and the metadata only
             if not topics and not session.metadata:
                 reason = str(exc) or type(exc).__name__

@@ -59,6 +59,9 @@ __all__ = ["INJECTIONS", "UrController", "rotation_vector"]
 
 # what the dashboard server refuses in local control (UR's e-series replies)
 _CONTROL_COMMANDS = {"power", "brake", "load", "play", "stop", "pause", "unlock", "shutdown"}
+# A dashboard command is read up to this many bytes (UR's are under 300): a longer line is an
+# unknown command, answered as one, and a line without end costs no more memory than this.
+_DASHBOARD_LINE_BYTES = 4096
 _LOCAL_CONTROL = (
     "Command is not allowed due to safety reasons, please switch robot to Remote Control mode and "
     "reconnect to port 29999"
@@ -574,8 +577,16 @@ class _Emulator:
                 self.connections.remove(conn)
             for name in [n for n, c in self.owner.items() if c is conn]:
                 del self.owner[name]
+        self._close(conn.sock)
+
+    def _close(self, sock: socket.socket) -> None:
+        """Close a connection whose handler has ended (the client closed or quit, or it failed):
+        kept open, each would hold a file descriptor until the controller stops."""
+        with self.lock:
+            if sock in self.sockets:
+                self.sockets.remove(sock)
         with contextlib.suppress(OSError):
-            conn.sock.close()
+            sock.close()
 
     # --- sockets ----------------------------------------------------------------------------------
 
@@ -612,7 +623,14 @@ class _Emulator:
                 with self.lock:
                     self.sockets.append(sock)
                 name = by_socket[listener]
-                self._spawn(handlers[name], f"ur-{name}", sock)
+                self._spawn(self._serve, f"ur-{name}", handlers[name], sock)
+
+    def _serve(self, handler: Any, sock: socket.socket) -> None:
+        """One connection, in a thread of its own: `handler` serves it, then it is closed."""
+        try:
+            handler(sock)
+        finally:
+            self._close(sock)
 
     def _received(self, sock: socket.socket) -> Iterator[bytes]:
         """What the client sends, until it closes; nothing while the link is down."""
@@ -631,12 +649,13 @@ class _Emulator:
                 buffer += data
                 while b"\n" in buffer:
                     line, buffer = buffer.split(b"\n", 1)
-                    command = line.decode(errors="replace").strip()
+                    command = line[:_DASHBOARD_LINE_BYTES].decode(errors="replace").strip()
                     reply = self._dashboard_reply(command)
                     self._event(f"dashboard {command!r} -> {reply!r}")
                     sock.sendall(reply.encode() + b"\n")
                     if command == "quit":
                         return
+                buffer = buffer[:_DASHBOARD_LINE_BYTES]  # an unfinished line: its start will do
 
     def _dashboard_reply(self, command: str) -> str:
         with self.lock:
@@ -843,6 +862,8 @@ class _Emulator:
             problems.append(
                 f"output frequency {frequency:g} Hz is outside 0 < f <= {self.rate_hz:g} Hz"
             )
+        elif math.isinf(self.rate_hz / frequency):  # every floor(rate / f) cycles: never
+            problems.append(f"output frequency {frequency:g} Hz is too low to stream")
         if missing:
             problems.append(f"outputs not found: {', '.join(missing)}")
         if not names:

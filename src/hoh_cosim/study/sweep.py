@@ -54,6 +54,7 @@ from hoh_cosim.errors import ConfigError, HohError
 from hoh_cosim.yamlfile import Where, read_yaml
 
 __all__ = [
+    "MAX_RUNS",
     "Outcome",
     "Sweep",
     "Variant",
@@ -68,6 +69,11 @@ ENGINES = ("inprocess", "fmu")
 _TOP_KEYS = ("name", "scenario", "engine", "duration_s", "seeds", "set", "grid", "random")
 _DISTRIBUTIONS = ("uniform", "log_uniform", "integer", "choice")
 FIXED_COLUMNS = ("run", "seed")
+MAX_RUNS = 10_000
+"""The most runs a sweep file may ask for (variants times seeds). Each variant is checked against
+the scenario before anything runs (10-30 ms a variant) and each run takes seconds: a larger study
+is several sweeps. Without a bound, `random: {n: 2147483647}` made its variants until memory ran
+out."""
 STATUS_COLUMNS = ("status", "error", "wall_s")
 
 
@@ -336,6 +342,21 @@ def _check(
             raise w.error(where_of[key], str(exc)) from None
 
 
+def _check_runs(points: int, seeds: int, where: str, w: Where) -> None:
+    """Refuse a sweep of more than `MAX_RUNS` runs before its variants are made."""
+    if points * seeds > MAX_RUNS:
+        raise w.error(
+            where,
+            f"{points} variants x {seeds} seeds = {points * seeds} runs, more than {MAX_RUNS}: "
+            "split the sweep",
+        )
+
+
+def _keys(value: Any) -> list[Any]:
+    """The keys of a mapping whose keys are all allowed (any other value has none)."""
+    return list(value) if isinstance(value, Mapping) else []
+
+
 def load_sweep(path: str | Path, engine: str | None = None) -> Sweep:
     """Read a sweep file and check every variant against its scenario."""
     from hoh_cosim.cosim.scenario import load_scenario
@@ -356,17 +377,18 @@ def load_sweep(path: str | Path, engine: str | None = None) -> Sweep:
     if not isinstance(seeds_raw, list) or not seeds_raw:
         raise w.error("seeds", f"expected a non-empty list of integers, got {seeds_raw!r}")
     seeds = [None if s is None else w.integer(s, f"seeds[{i}]") for i, s in enumerate(seeds_raw)]
-    fixed = w.mapping(raw.get("set") or {}, list(raw.get("set") or {}), "set")
+    fixed = w.mapping(raw.get("set") or {}, _keys(raw.get("set")), "set")
     if "grid" in raw and "random" in raw:
         raise w.error("random", "give either grid or random, not both")
 
     points: list[dict[str, Any]]
     if "grid" in raw:
-        grid = w.mapping(raw["grid"], list(raw["grid"] or {}), "grid")
+        grid = w.mapping(raw["grid"], _keys(raw["grid"]), "grid")
         for key, values in grid.items():
             if not isinstance(values, list) or not values:
                 raise w.error(f"grid.{key}", f"expected a non-empty list of values, got {values!r}")
         keys = list(grid)
+        _check_runs(math.prod(len(values) for values in grid.values()), len(seeds), "grid", w)
         points = [
             dict(zip(keys, combo, strict=True)) for combo in itertools.product(*grid.values())
         ]
@@ -374,8 +396,9 @@ def load_sweep(path: str | Path, engine: str | None = None) -> Sweep:
     elif "random" in raw:
         rand = w.mapping(raw["random"], ("n", "seed", "params"), "random")
         n = w.integer(rand.get("n"), "random.n", low=1)
+        _check_runs(n, len(seeds), "random.n", w)
         rng = np.random.default_rng(w.integer(rand.get("seed", 0), "random.seed"))
-        params = w.mapping(rand.get("params"), list(rand.get("params") or {}), "random.params")
+        params = w.mapping(rand.get("params"), _keys(rand.get("params")), "random.params")
         if not params:
             raise w.error("random.params", "expected at least one parameter")
         keys = list(params)
