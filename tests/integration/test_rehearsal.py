@@ -27,7 +27,7 @@ from hoh_cosim.hardware.robot import Robot, RobotState
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import Session, SessionLog, read_session
 from hoh_cosim.rehearsal.rehearse import rehearsal_config, truth_calibration
-from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
+from hoh_cosim.rehearsal.world import TASK_LEAD_S, Fault, RehearsalWorld, WorldSetup
 from plant_models.sensors import FT150Params
 from tests.mcap_schemas import invalid_messages
 from tests.xdist_groups import REAL_TIME
@@ -295,6 +295,28 @@ def test_a_loop_starved_past_the_watchdog_is_named_as_such(tmp_path):
     events = read_session(log_path).messages["/events"]
     assert events[-1]["event"] == "end"
     assert events[-1]["detail"] == result.cause
+
+
+def test_a_held_task_waits_for_start_task_however_long(tmp_path):
+    # a rehearsal's hand comes when the runner's rebias is done, not at a guessed world time
+    def hand_force(world) -> float:
+        return float(np.linalg.norm(world._state.read()[36:39]))  # the TCP's external force
+
+    with RehearsalWorld(WorldSetup(task="circle", task_start_s=None)) as world:
+        robot = world.robot()
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            assert hand_force(world) < 1e-9
+            time.sleep(0.02)
+        held_until = robot.state().timestamp_s
+        world.start_task()
+        deadline = time.monotonic() + 10.0
+        while hand_force(world) < 0.5 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        taken, force = robot.state().timestamp_s, hand_force(world)
+    assert force >= 0.5, "the hand never came"
+    assert held_until >= 1.5  # the world ran meanwhile: the task was held, not slow
+    assert taken - held_until >= TASK_LEAD_S - 0.05
 
 
 def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):

@@ -108,7 +108,7 @@ class Rehearsal:
     robot_rate_hz: float = 500.0
     faults: tuple[Fault, ...] = ()
     rebias_samples: int = 500
-    task_start_s: float | None = None  # None: once the rebias is surely over
+    task_start_s: float | None = None  # None: once the runner says its rebias is done
     phantom_below_m: float | None = None
     controller: ControllerParams | None = None
     seed: int = 1
@@ -135,16 +135,12 @@ def rehearse(
     setup: Rehearsal, *, announce: Callable[[str], None] = lambda message: None
 ) -> RehearsalResult:
     """Start the world, run one session against it for `setup.seconds`, stop everything."""
-    # the hand takes the handle once the rebias (rebias_samples at 200 Hz) is surely over
-    start = (
-        setup.task_start_s
-        if setup.task_start_s is not None
-        else 1.0 + setup.rebias_samples / 200.0 + 1.0
-    )
+    # without a start time, the hand takes the handle once the runner says its rebias is done
+    # (a start time guessed from the rebias's length came too early on a busy machine)
     world_setup = WorldSetup(
         robot_rate_hz=setup.robot_rate_hz,
         task=setup.task,
-        task_start_s=start,
+        task_start_s=setup.task_start_s,
         phantom_below_m=setup.phantom_below_m,
         seed=setup.seed,
         faults=setup.faults,
@@ -172,7 +168,13 @@ def rehearse(
                 robot = RtdeRobot(setup.ur_host, watchdog_hz=world_setup.watchdog_hz)
                 announce(f"UR controller emulated on {setup.ur_host} (ur-rtde)")
             log = SessionLog(setup.log_path, _metadata(config, world_setup)).start()
-            runner = Runner(config, robot, ft, probe, calibration, log, announce=announce)
+
+            def tell(message: str) -> None:
+                if message.startswith("rebias done"):
+                    world.start_task()
+                announce(message)
+
+            runner = Runner(config, robot, ft, probe, calibration, log, announce=tell)
             session = runner.run(setup.seconds)
     return RehearsalResult(session, setup.log_path, probe.parser.framing, probe.parser.byte_order)
 

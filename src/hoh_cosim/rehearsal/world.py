@@ -19,6 +19,7 @@ sample of NaNs), `force_spike` (40 N more on the probe sensor from then on), `pr
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import multiprocessing as mp
 import os
@@ -60,7 +61,10 @@ WORLD_DT = 1e-3
 # p, R, twist, [mode, safety, protective, emergency, program, time], q, qd, the TCP's wrench,
 # the orientation as a rotation vector (as RTDE gives it; computed here, not in the runner's loop)
 _STATE = 3 + 9 + 6 + 6 + 6 + 6 + 6 + 3
-_COMMAND = 6 + 4  # twist, [acceleration, kick time, stop, sequence]
+_COMMAND = 6 + 4 + 1  # twist, [acceleration, kick time, stop, sequence], the task's go
+TASK_LEAD_S = 0.5
+"""[s] With no `task_start_s`, the hand takes the handle this long after `start_task()`."""
+_HELD = 1e9  # [s] a task start that waits for start_task()
 
 
 class SeqLock:
@@ -97,7 +101,9 @@ class WorldSetup:
     robot_rate_hz: float = 500.0
     watchdog_hz: float = 20.0
     task: str = "circle"
-    task_start_s: float = 4.0  # the hand takes the handle then (after the runner's rebias)
+    # the hand takes the handle then (after the runner's rebias); None: TASK_LEAD_S after
+    # `RehearsalWorld.start_task()`, which a rehearsal calls once the rebias is done
+    task_start_s: float | None = 4.0
     phantom_below_m: float | None = None  # a flat phantom this far below the tip (press tasks)
     ft_rate_hz: float = 200.0
     probe_framing: str = "seed18"
@@ -152,7 +158,10 @@ class _World:
                 shape="plane", plane_point_B=[0.0, 0.0, float(tip[2]) - setup.phantom_below_m]
             )
         self.plant = Plant(PlantParams(arm=arm, phantom=phantom))
-        self.operator = Operator(OperatorParams(task=setup.task, start_s=setup.task_start_s))
+        start = _HELD if setup.task_start_s is None else setup.task_start_s
+        self.operator = Operator(OperatorParams(task=setup.task, start_s=start))
+        self.task_held = setup.task_start_s is None
+        self.go = False
         rng = np.random.default_rng(setup.seed)
         self.ft = FT150Sensor(FT150Params(rate_hz=setup.ft_rate_hz), rng=rng)
         self.probe = FSE103Sensor(FSE103Params(), rng=rng)
@@ -237,6 +246,7 @@ class _World:
     def _command(self, now: float) -> Vec:
         c = self.command.read()
         twist, kick, stop = c[:6], c[7], c[8]
+        self.go = c[10] > 0.5
         if stop > 0.5:
             self.program_stopped = True
         if kick > 0.0 and now - kick > 1.0 / self.setup.watchdog_hz:
@@ -301,6 +311,10 @@ class _World:
         if round(t / WORLD_DT) % 20 == 0:  # look for a client every 20 ms
             self._accept()
         twist = self._command(time.monotonic())
+        if self.task_held and self.go:  # the rebias is done: the hand comes in a moment
+            self.task_held = False
+            start = t + TASK_LEAD_S
+            self.operator.retune(dataclasses.replace(self.operator.params, start_s=start))
         hand = self.hand = self.operator.step(t, WORLD_DT, self.outputs)
         self.outputs = self.plant.step(
             t,
@@ -386,6 +400,11 @@ class RehearsalWorld:
             raise RunError(f"the rehearsal world failed to start: {message[1]}")
         _, self.ft_port, self.pty_name, self.truth = message
         return self
+
+    def start_task(self) -> None:
+        """Let the operator's hand come, TASK_LEAD_S from now (a world set up without
+        `task_start_s`; otherwise nothing changes)."""
+        self._command.write(np.array([1.0]), slice(10, 11))
 
     def robot(self) -> SimulatedRobot:
         return SimulatedRobot(self, 1.0 / self.setup.robot_rate_hz)
