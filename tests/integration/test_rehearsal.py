@@ -116,13 +116,13 @@ def assert_stopped_and_logged(outcome: Outcome, cause: str) -> None:
 
 def test_a_clean_session_guides_the_robot_and_logs_every_cycle(tmp_path):
     outcome = run_session(tmp_path, 5.0)
+    result = outcome.result
+    assert result.clean, result.cause
+    assert result.cause == "5 s done"
     # the rates the rebias measured and handed to the filters: the FT-150's on receipt times
     # (the world sends 200 Hz), the FSE103's on its own time stamps (50 Hz, whole milliseconds)
-    assert 1.0 / outcome.result.rebias.ft_period_s == pytest.approx(200.0, rel=0.05)
-    assert 1.0 / outcome.result.rebias.probe_period_s == pytest.approx(50.0, rel=0.03)
-    result = outcome.result
-    assert result.clean
-    assert result.cause == "5 s done"
+    assert 1.0 / result.rebias.ft_period_s == pytest.approx(200.0, rel=0.05)
+    assert 1.0 / result.rebias.probe_period_s == pytest.approx(50.0, rel=0.03)
     assert result.cycles == 2500  # 500 Hz
     assert outcome.result.rebias is not None
     # the rebias found the FT-150's offset (the calibration's) within the noise

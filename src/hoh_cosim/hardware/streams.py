@@ -13,7 +13,6 @@ millisecond counter is kept beside it (`device_ms`) but never mixed with host ti
 from __future__ import annotations
 
 import contextlib
-import itertools
 import math
 import threading
 import time
@@ -195,7 +194,8 @@ def robust_period(counts: Sequence[int], times_s: Sequence[float]) -> float:
 
     A sample can reach us late (a stall: the machine busy, a kernel worker starved, a buffer), never
     early. So the sender's schedule is the line under the points, not through them: the lower
-    convex hull of (count, time), whose edge over the middle count gives the period. A stall
+    convex hull of (count, time), whose chord across the middle half of the window gives the
+    period. A stall
     followed by a burst, or by a backlog drained one sample per cycle, only lifts points above
     that line (the median spacing of receipt times took such a drain for a 500 Hz stream; a
     regression through the points is pulled by it as well). NaN with fewer than 3 points.
@@ -215,11 +215,13 @@ def robust_period(counts: Sequence[int], times_s: Sequence[float]) -> float:
                 break  # a left turn: b stays on the lower hull
             hull.pop()
         hull.append(i)
-    middle = 0.5 * (x[0] + x[-1])
-    for a, b in itertools.pairwise(hull):
-        if x[b] >= middle:
-            return float((y[b] - y[a]) / (x[b] - x[a]))
-    return math.nan  # unreachable: the last hull point is the last point
+    # the hull's chord from its last corner in the first quarter to its first in the last
+    # quarter: at least half the window long, so the small delays of those two least-delayed
+    # samples move it by little (a single edge over the middle can be two samples short)
+    span = x[-1] - x[0]
+    a = max(i for i in hull if x[i] <= x[0] + 0.25 * span)
+    b = min(i for i in hull if x[i] >= x[-1] - 0.25 * span)
+    return float((y[b] - y[a]) / (x[b] - x[a]))
 
 
 @dataclass(frozen=True)
