@@ -201,6 +201,7 @@ def _hypothesis(target: Any, ws: Any, tally: Tally, out: Path, seconds: float) -
     from hypothesis import HealthCheck, Phase, given, settings
 
     deadline = time.monotonic() + seconds
+    tried = [0]
 
     @settings(
         max_examples=200,
@@ -211,9 +212,12 @@ def _hypothesis(target: Any, ws: Any, tally: Tally, out: Path, seconds: float) -
     )
     @given(target.strategy(ws))
     def batch(value: Any) -> None:
-        if time.monotonic() < deadline:
+        # at least one input, however long the start-up took on a busy machine
+        if time.monotonic() < deadline or not tried[0]:
+            tried[0] += 1
             _guarded(target, ws, value, tally, out)
 
+    batch()
     while time.monotonic() < deadline:
         batch()
 
