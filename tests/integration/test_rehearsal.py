@@ -209,11 +209,12 @@ def test_garbage_is_counted_and_the_session_goes_on(tmp_path, fault):
     assert not outcome.after.program_running
 
 
-def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):
-    # the hand pushes from the start: the reading disagrees with the calibrated weight
-    setup = WorldSetup(task="push_release", task_start_s=0.0)
+def unlogged_session(
+    tmp_path: Path, setup: WorldSetup, rebias_samples: int
+) -> tuple[SessionResult, RobotState]:
+    """A 3 s session without a log against a world set up so, and the robot once stopped."""
     with RehearsalWorld(setup) as world:
-        config = rehearsal_config(world, tmp_path, rebias_samples=100)
+        config = rehearsal_config(world, tmp_path, rebias_samples=rebias_samples)
         robot = world.robot()
         runner = Runner(
             config,
@@ -223,7 +224,14 @@ def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):
             truth_calibration(world.truth),
         )
         result = runner.run(3.0)
-        after = stopped_state(robot)
+        return result, stopped_state(robot)
+
+
+def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):
+    # the hand pushes from the start: the reading disagrees with the calibrated weight
+    result, after = unlogged_session(
+        tmp_path, WorldSetup(task="push_release", task_start_s=0.0), rebias_samples=100
+    )
     assert not result.clean
     assert result.cause.startswith("rebias refused")
     assert result.cycles == 0
@@ -232,18 +240,7 @@ def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):
 
 def test_a_stream_faster_than_its_datasheet_allows_is_refused_at_the_rebias(tmp_path):
     # 500 Hz is no FT-150 rate: the periods would go to the filters, so the rebias refuses
-    with RehearsalWorld(WorldSetup(ft_rate_hz=500.0)) as world:
-        config = rehearsal_config(world, tmp_path, rebias_samples=200)
-        robot = world.robot()
-        runner = Runner(
-            config,
-            robot,
-            FT150Stream("127.0.0.1", world.ft_port),
-            FSE103Port(world.pty_name, reconnect=False),
-            truth_calibration(world.truth),
-        )
-        result = runner.run(3.0)
-        after = stopped_state(robot)
+    result, after = unlogged_session(tmp_path, WorldSetup(ft_rate_hz=500.0), rebias_samples=200)
     assert not result.clean
     found = re.search(
         r"^rebias refused: FT-150 stream at \S+ measured at ([\d.]+) Hz \(receipt times\), "

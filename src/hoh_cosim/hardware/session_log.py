@@ -39,6 +39,7 @@ per-message index (it alone was 130 MB an hour): readers find a time through the
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import multiprocessing as mp
 import queue
@@ -351,8 +352,6 @@ def at_log_resolution(state: RobotState) -> RobotState:
     orientation through its rotation vector at its decimals (the robot's own where it gives one:
     converting a matrix costs 50 µs). The loop works with this state, so that a replay of the log
     feeds the blocks exactly what the session fed them."""
-    import dataclasses
-
     p_decimals = int(RESOLUTION["/robot", "p_BT_B"])
     r_decimals = int(RESOLUTION["/robot", "rotvec_BT"])
     rotvec = state.rotvec_BT if state.rotvec_BT is not None else matrix_to_rotvec(state.R_BT)

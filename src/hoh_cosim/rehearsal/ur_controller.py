@@ -55,7 +55,7 @@ import numpy as np
 from hoh_cosim.rehearsal import rtde_protocol as rtde
 from hoh_cosim.rehearsal.world import as_hardware
 
-__all__ = ["INJECTIONS", "UrController", "rotation_vector"]
+__all__ = ["INJECTIONS", "UrController"]
 
 # what the dashboard server refuses in local control (UR's e-series replies)
 _CONTROL_COMMANDS = {"power", "brake", "load", "play", "stop", "pause", "unlock", "shutdown"}
@@ -107,13 +107,6 @@ VERSIONS = {
     "e": ((5, 11, 1, 108318), "URSoftware 5.11.1.108318 (Dec 06 2021)", 500.0),
     "cb3": ((3, 15, 7, 106331), "URSoftware 3.15.7.106331 (Mar 11 2021)", 125.0),
 }
-
-
-def rotation_vector(R: np.ndarray) -> np.ndarray:
-    """The rotation vector (axis times angle) of a rotation matrix, as UR reports a TCP pose."""
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_matrix(np.asarray(R, dtype=float).reshape(3, 3)).as_rotvec()
 
 
 @dataclass
@@ -399,8 +392,8 @@ class _Emulator:
 
     def _state(self) -> dict[str, Any]:
         s = self.world._state.read(tries=3)
-        p, R, twist, flags = s[0:3], s[3:12], s[12:18], s[18:24]
-        q, qd, wrench = s[24:30], s[30:36], s[36:42]
+        p, twist, flags = s[0:3], s[12:18], s[18:24]
+        q, qd, wrench, rotvec = s[24:30], s[30:36], s[36:42], s[42:45]
         safety_mode = SAFETY_NORMAL
         bits = 1 << BIT_NORMAL
         if self.protective or flags[2] > 0.5:
@@ -409,7 +402,7 @@ class _Emulator:
             safety_mode = SAFETY_ROBOT_EMERGENCY
             bits = (1 << BIT_ROBOT_EMERGENCY) | (1 << BIT_EMERGENCY)
         running = self.runtime_state == PLAYING
-        pose = list(p) + list(rotation_vector(R.reshape(3, 3)))
+        pose = list(p) + list(rotvec)  # the world publishes the orientation as UR reports it
         return {
             "timestamp": float(flags[5]),  # the controller clock: the world time, which it drives
             "actual_TCP_pose": pose,
