@@ -242,12 +242,12 @@ def test_the_machines_load_alone_ends_nothing():
 )
 def test_a_silence_as_long_as_the_watchdog_is_a_starved_loop(silent_s, cause):
     policy = SessionPolicy(LimitParams(), watchdog_s=0.05)
-    assert starved_cause(policy, 7, silent_s) == cause
+    assert starved_cause(policy, "cycle 7", silent_s) == cause
 
 
 def test_without_a_watchdog_no_silence_ends_a_session():
-    assert starved_cause(POLICY, 1, 10.0) is None
-    assert starved_cause(POLICY, 1, math.inf) is None
+    assert starved_cause(POLICY, "cycle 1", 10.0) is None
+    assert starved_cause(POLICY, "cycle 1", math.inf) is None
 
 
 def test_a_stale_probe_flag_without_a_probe_stops_the_controller():

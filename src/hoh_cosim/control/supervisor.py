@@ -11,8 +11,9 @@ Every safety decision lives here, as pure functions over what the loop knows:
                     non-finite value, a stop flag (a stale stream is a gap that zeroes the command
                     for up to `stale_stop_s`, then the end), a command outside the limits
                                                                     → send, or end with the cause
-    starved_cause   a cycle that reads the robot later after the last command than the robot's
-                    watchdog allows: the loop itself was starved, whatever the robot says now
+    starved_cause   a cycle that reads or commands the robot later after the last command than
+                    the robot's watchdog allows: the loop itself was starved, whatever the robot
+                    says now
                                                                     → end with that cause
 
 A stream's age counts the loop's cycles, not the wall clock: a loop held up for 100 ms runs one
@@ -289,15 +290,16 @@ def robot_cause(policy: SessionPolicy, problem: str) -> str:
     return f"{policy.robot}: {problem}"
 
 
-def starved_cause(policy: SessionPolicy, cycle: int, silent_s: float) -> str | None:
-    """The cause to end with when cycle `cycle` read the robot `silent_s` after the last command:
-    at or past the robot's watchdog the robot has stopped itself, and the loop's stall, not what
-    the robot reports now ("program not running"), is why."""
+def starved_cause(policy: SessionPolicy, before: str, silent_s: float) -> str | None:
+    """The cause to end with when the loop, about to read or command the robot (`before`: "cycle
+    7"), finds `silent_s` passed since its last command: at or past the robot's watchdog the robot
+    has stopped itself, and the loop's stall, not what the robot reports now ("program not
+    running"), is why."""
     if math.isinf(policy.watchdog_s) or not silent_s >= policy.watchdog_s:
         return None
     return (
-        f"the control loop was starved: no command for {1e3 * silent_s:.0f} ms before cycle "
-        f"{cycle}, past the robot's {1e3 * policy.watchdog_s:.0f} ms watchdog (this machine is "
+        f"the control loop was starved: no command for {1e3 * silent_s:.0f} ms before {before}, "
+        f"past the robot's {1e3 * policy.watchdog_s:.0f} ms watchdog (this machine is "
         "overloaded, or the loop lacks its real-time priority)"
     )
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import time
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -169,6 +170,14 @@ class _RtdePacer:
         return late
 
 
+def _thread_ids() -> set[int]:
+    """This process's threads (Linux: /proc/self/task), empty where that cannot be read."""
+    try:
+        return {int(name) for name in os.listdir("/proc/self/task")}
+    except OSError:
+        return set()
+
+
 _ABANDONED: list[Any] = []  # ur-rtde interfaces of a lost link, never destroyed (see close())
 
 
@@ -209,6 +218,7 @@ class RtdeRobot:
         self._last_timestamp, self._last_change = math.nan, time.monotonic()
         self._lost = False
         self._watchdog_on = False
+        self.helper_thread_ids: tuple[int, ...] = ()  # ur-rtde's own threads, once connected
 
     def describe(self) -> str:
         return f"UR controller at {self.host} (RTDE)"
@@ -221,6 +231,7 @@ class RtdeRobot:
             import rtde_receive
         except ImportError:
             raise RunError('ur-rtde is not installed: pip install "hoh-cosim[hardware]"') from None
+        before = _thread_ids()
         try:
             self._receive = rtde_receive.RTDEReceiveInterface(
                 self.host, self.frequency_hz, RECEIVED, rt_priority=self.rt_priority
@@ -231,6 +242,9 @@ class RtdeRobot:
         except RuntimeError as exc:
             self.close()
             raise RunError(f"{self.describe()}: cannot connect: {exc}") from None
+        # the threads ur-rtde started (its receivers): a real-time loop must raise them with
+        # itself, or wait on them (its rt_priority argument left them at the default here)
+        self.helper_thread_ids = tuple(sorted(_thread_ids() - before))
         if math.isnan(self.period_s):
             self.period_s = self._step_time()
 

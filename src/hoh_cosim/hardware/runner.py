@@ -31,7 +31,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -41,7 +41,13 @@ from hoh_cosim.control.controller import HandGuidingController
 from hoh_cosim.control.cycle import ControlBlocks, Reading, SensorSetup, control_cycle
 from hoh_cosim.control.estimator import Estimator, import_filter_libraries
 from hoh_cosim.control.gravity import GravityCalibration, GravityModel
-from hoh_cosim.control.supervisor import SessionPolicy, Status, robot_cause, starved_cause
+from hoh_cosim.control.supervisor import (
+    SessionPolicy,
+    Status,
+    Verdict,
+    robot_cause,
+    starved_cause,
+)
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.config import HardwareConfig
@@ -204,13 +210,23 @@ class Runner:
                     raise RunError(f"{source.describe()}: no data within {timeout_s:g} s ({why})")
                 time.sleep(0.01)
 
+    def _starved(self, before: str) -> str | None:
+        """The starved loop's cause when the robot's watchdog has passed since our last command."""
+        return starved_cause(self.policy(), before, time.perf_counter() - self._commanded_s)
+
     def _hold(self, pacer: Any) -> RobotState:
         """One cycle of standing still (zero twist, watchdog kicked); the state read."""
         pacer.wait()
         state = self.robot.state()
+        starved = self._starved("a cycle of standing still")
+        if starved is not None:
+            raise RunError(starved)
         problem = named_problem(self.robot, state)
         if problem is not None:
             raise RunError(f"{self.robot.describe()}: {problem}")
+        starved = self._starved("the command to stand still")
+        if starved is not None:
+            raise RunError(starved)
         self.robot.speed_l(np.zeros(6), self.config.robot.acceleration)
         self.robot.kick_watchdog()
         self._commanded_s = time.perf_counter()
@@ -350,7 +366,11 @@ class Runner:
             self._wait_for_samples(5.0)
             # from the first command on, the robot's watchdog wants a kick every cycle: nothing slow
             # (a garbage collection, building the blocks) may come between two cycles
-            with _realtime_interpreter(self.config.robot.realtime_priority, self.announce):
+            with _realtime_interpreter(
+                self.config.robot.realtime_priority,
+                self.announce,
+                getattr(self.robot, "helper_thread_ids", ()),
+            ):
                 pacer = self.robot.pacer()
                 self.announce("rebias: hold still")
                 rebias = self.rebias(pacer)
@@ -408,7 +428,7 @@ class Runner:
             state = at_log_resolution(self.robot.state())  # what the log can hold: replayable
             # the robot's watchdog counts from our last command: past it, the robot has stopped
             # itself because this process stalled, whatever it reports now
-            starved = starved_cause(policy, k, time.perf_counter() - self._commanded_s)
+            starved = starved_cause(policy, f"cycle {k}", time.perf_counter() - self._commanded_s)
             if starved is not None:
                 self._event("stop", starved)
                 return starved, False
@@ -446,6 +466,12 @@ class Runner:
                 self._event(event.name, event.detail)
                 self.announce(event.announcement)
             cause = cycle.verdict.cause
+            if cause is None:  # the watchdog counts between commands: a stall in this cycle too
+                cause = starved_cause(
+                    policy, f"the command of cycle {k}", time.perf_counter() - self._commanded_s
+                )
+                if cause is not None:  # logged as it was: nothing sent
+                    cycle.verdict = Verdict(cycle.verdict.status, np.zeros(6), cause)
             if cause is None:
                 self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
                 self.robot.kick_watchdog()
@@ -489,7 +515,10 @@ def _set_fifo(thread_id: int, priority: int) -> None:
 
 @contextlib.contextmanager
 def _realtime_interpreter(
-    priority: int | None, announce: Callable[[str], None], switch_interval_s: float = 2e-4
+    priority: int | None,
+    announce: Callable[[str], None],
+    native_helpers: Sequence[int] = (),
+    switch_interval_s: float = 2e-4,
 ) -> Iterator[None]:
     """The interpreter and the scheduler tuned for the loop, and restored after it.
 
@@ -500,7 +529,10 @@ def _realtime_interpreter(
       milliseconds, longer than an e-series cycle.
     - With `priority` (Linux, and the right to use it): the loop thread runs SCHED_FIFO at that
       priority and the threads serving it one below, so no ordinary process delays them; the
-      readers must be raised too, or the loop would wait for a GIL held by a descheduled reader.
+      readers must be raised too, or the loop would wait for a GIL held by a descheduled reader;
+      so must the robot's own threads (`native_helpers`, thread ids: ur-rtde's receivers, which
+      its speedL waits on: left at the default priority, a busy machine starved them for 130 ms
+      at the first command, past the robot's watchdog).
     """
     previous = sys.getswitchinterval()
     gc.collect()
@@ -512,10 +544,10 @@ def _realtime_interpreter(
         try:
             _set_fifo(0, priority)
             raised.append(0)
-            for thread in _helper_threads():
-                if thread.native_id is not None:
-                    _set_fifo(thread.native_id, max(1, priority - 1))
-                    raised.append(thread.native_id)
+            helpers = [t.native_id for t in _helper_threads() if t.native_id is not None]
+            for thread_id in [*helpers, *native_helpers]:
+                _set_fifo(thread_id, max(1, priority - 1))
+                raised.append(thread_id)
         except (OSError, AttributeError) as exc:
             announce(f"note: real-time priority {priority} refused ({exc}); running without it")
     try:

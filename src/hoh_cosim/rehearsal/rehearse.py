@@ -34,6 +34,7 @@ from hoh_cosim.hardware.ft150 import FT150Stream
 from hoh_cosim.hardware.robot import Robot, RtdeRobot
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import SessionLog
+from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 from hoh_cosim.rehearsal.ur_controller import UrController
 from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
 
@@ -73,7 +74,7 @@ def rehearsal_config(
     rebias_samples: int = 500,
     estimator: EstimatorParams | None = None,
     controller: ControllerParams | None = None,
-    realtime_priority: int | None = None,
+    realtime_priority: int | None = LOOP_PRIORITY,
 ) -> HardwareConfig:
     setup = world.setup
     return HardwareConfig(
@@ -112,7 +113,7 @@ class Rehearsal:
     phantom_below_m: float | None = None
     controller: ControllerParams | None = None
     seed: int = 1
-    realtime_priority: int | None = None
+    realtime_priority: int | None = LOOP_PRIORITY  # None: the default priority
     ur_host: str | None = None
 
     def __post_init__(self) -> None:
