@@ -23,13 +23,13 @@ from hoh_cosim.hardware.calibrate import calibrate
 from hoh_cosim.hardware.diagnostics import read_streams
 from hoh_cosim.hardware.fse103 import FSE103Port
 from hoh_cosim.hardware.ft150 import FT150Stream
+from hoh_cosim.hardware.log_check import invalid_messages
 from hoh_cosim.hardware.robot import Robot, RobotState
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import Session, SessionLog, read_session
 from hoh_cosim.rehearsal.rehearse import rehearsal_config, truth_calibration
 from hoh_cosim.rehearsal.world import TASK_LEAD_S, Fault, RehearsalWorld, WorldSetup
 from plant_models.sensors import FT150Params
-from tests.mcap_schemas import invalid_messages
 from tests.xdist_groups import REAL_TIME
 
 pytestmark = REAL_TIME

@@ -25,6 +25,7 @@ import pytest
 pytest.importorskip("mcap")
 
 from hoh_cosim.errors import InputFileError, RunError
+from hoh_cosim.hardware.log_check import invalid_messages
 from hoh_cosim.hardware.session_log import (
     CHANNELS,
     CYCLE_LAYOUT,
@@ -38,7 +39,6 @@ from hoh_cosim.hardware.session_log import (
     decode_message,
     read_session,
 )
-from tests.mcap_schemas import invalid_messages
 
 ROWS = 40
 DT = 0.002

@@ -1,20 +1,24 @@
 """Every message of an MCAP file checked against its channel's JSON schema with `jsonschema`, the
-reference validator, reading the file with the `mcap` package: as a foreign reader would."""
+reference validator, reading the file with the `mcap` package: as a foreign reader would. (jsonschema
+comes with the `hardware` extra.)"""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
-from jsonschema import Draft202012Validator
-from mcap.reader import make_reader
+__all__ = ["invalid_messages"]
 
 
-def invalid_messages(path: Path) -> tuple[int, list[str]]:
+def invalid_messages(path: str | Path) -> tuple[int, list[str]]:
     """(messages read, one line per message that its schema rejects or that is not strict JSON)."""
+    from jsonschema import Draft202012Validator
+    from mcap.reader import make_reader
+
     problems: list[str] = []
     count = 0
-    validators: dict[int, Draft202012Validator] = {}
+    validators: dict[int, Any] = {}
     with Path(path).open("rb") as stream:
         for schema, channel, message in make_reader(stream).iter_messages():
             count += 1

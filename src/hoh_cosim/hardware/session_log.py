@@ -66,6 +66,7 @@ __all__ = [
     "CYCLE_LAYOUT",
     "FLOAT32",
     "NONFINITE",
+    "ORPHANED_CAUSE",
     "RESOLUTION",
     "ZSTD_LEVEL",
     "CycleRecord",
@@ -157,6 +158,9 @@ ZSTD_LEVEL = 9
 """The chunks' zstd level, chosen by measurement (docs/decisions.md): level 3, the mcap writer's own,
 writes a third more; 12 and 15 gain nothing over 9; 19 a sixth less for 30 times the time (a fifth
 of a core, beside the loop)."""
+
+ORPHANED_CAUSE = "the runner process ended without closing the log"
+"""The `end` event's detail the writer gives when its runner is gone before saying how it ended."""
 
 # k, t, whether an FT-150 sample and a probe sample exist yet, then the layout
 _HEAD = 4
@@ -453,12 +457,16 @@ def _writer_main(
             data = json.dumps(message, allow_nan=False).encode()  # strict JSON, as browsers read
             writer.add_message(channels[topic], log_ns, data, log_ns)
 
+        ended = False  # the runner's `end` event came
+
         def drain_events() -> None:
+            nonlocal ended
             while True:
                 try:
                     k, t, event, detail = events.get_nowait()
                 except queue.Empty:
                     return
+                ended = ended or event == "end"
                 add("/events", t, {"k": k, "t": t, "event": event, "detail": detail})
 
         def overflow(first: int, lost: int) -> None:
@@ -467,9 +475,11 @@ def _writer_main(
 
         done, last_flush = 0, time.monotonic()
         counts: dict[str, int] = {}  # the sensor channels' last written sample counts
-        finishing = False
+        finishing = orphaned = False
+        last = (0, 0.0)  # the last cycle written: k, t
         while True:
-            finishing = finishing or stop.is_set() or os.getppid() != parent
+            orphaned = orphaned or os.getppid() != parent
+            finishing = finishing or stop.is_set() or orphaned
             head = written.value
             # The loop writes row `head` into the slot of row `head - capacity` before it counts
             # it: rows from `head - capacity + 1` on are intact now (from `head - capacity` on once
@@ -484,10 +494,15 @@ def _writer_main(
             for row in block[intact - first :]:
                 for topic, message in _messages(row, counts):
                     add(topic, float(row[1]), message)
+                last = (int(row[0]), float(row[1]))
             done = head
             drain_events()
             if finishing and done >= written.value:
                 drain_events()
+                if orphaned and not ended:  # killed: the log still says how the session ended
+                    k, t = last
+                    detail = f"{ORPHANED_CAUSE} (killed or crashed) after cycle {k}"
+                    add("/events", t, {"k": k, "t": t, "event": "end", "detail": detail})
                 break
             if time.monotonic() - last_flush >= flush_s:
                 writer.flush()

@@ -11,9 +11,8 @@ and advances the simulated world of this package in real time, 1 ms a tick:
   controller's habits: the watchdog (no kick for 1/watchdog_hz s: the program stops), speedStop,
   stopScript, a protective stop.
 
-Faults are scheduled at world times: `probe_unplug` (the pty's master closes), `ft_stall` (the stream
-stays open and goes quiet), `ft_garbage` / `probe_garbage` (junk bytes in the stream), `ft_nan` (a
-sample of NaNs), `force_spike` (40 N more on the probe sensor from then on), `protective_stop`.
+Faults (`hoh_cosim.rehearsal.faults`) are scheduled at world times, or injected while the world runs
+(`RehearsalWorld.inject`, as a fault campaign does), each for a duration or for good.
 """
 
 from __future__ import annotations
@@ -38,6 +37,7 @@ from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pacer, RobotState
 from hoh_cosim.rehearsal.faults import FAULTS, Fault
+from hoh_cosim.rehearsal.priorities import HARDWARE_PRIORITY
 from plant_models.arm import ArmParams
 from plant_models.operator import TASKS, Operator, OperatorParams
 from plant_models.plant import Plant, PlantParams
@@ -119,19 +119,29 @@ class WorldSetup:
 
 
 def as_hardware() -> None:
-    """Raise this process above ordinary ones where the system permits (nice -10, which needs
-    CAP_SYS_NICE, as root has): on a rig the emulated devices are separate hardware with their own
-    clocks, and they must keep their rates however busy the machine is, or a rehearsal would see
-    silent devices where there are none. Not permitted: the default priority, and a loaded machine
-    can slow the devices (the rehearsal's rate check then says so)."""
+    """Raise this process above ordinary ones, and above the runner, where the system permits: on
+    a rig the emulated devices are separate hardware with their own clocks and CPUs, and they must
+    keep their rates however busy the machine is, or a rehearsal would see silent devices and a
+    stalled controller where there are none. SCHED_FIFO at HARDWARE_PRIORITY (needs CAP_SYS_NICE,
+    as root has; threads started later inherit it), else nice -10, else the default priority (a
+    loaded machine can then slow the devices; the rehearsal's rate check says so). The devices
+    sleep between their ticks (a world tick is a fraction of a millisecond), so the rest of the
+    machine keeps most of its time; the kernel keeps 5 % for ordinary processes in any case."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(HARDWARE_PRIORITY))
+        return
+    except (OSError, AttributeError):
+        pass
     with contextlib.suppress(OSError):
         os.setpriority(os.PRIO_PROCESS, 0, -10)
 
 
-def _world_main(setup: WorldSetup, state: Any, command: Any, ready: Any, stop: Any) -> None:
+def _world_main(
+    setup: WorldSetup, state: Any, command: Any, ready: Any, stop: Any, injections: Any
+) -> None:
     as_hardware()
     try:
-        world = _World(setup, state, command)
+        world = _World(setup, state, command, injections)
     except Exception as exc:  # report, do not hang the parent
         ready.put(("error", f"{type(exc).__name__}: {exc}"))
         return
@@ -143,8 +153,8 @@ def _world_main(setup: WorldSetup, state: Any, command: Any, ready: Any, stop: A
 
 
 class _World:
-    def __init__(self, setup: WorldSetup, state: Any, command: Any) -> None:
-        from hoh_cosim.hardware.fse103 import encode_frame
+    def __init__(self, setup: WorldSetup, state: Any, command: Any, injections: Any = None) -> None:
+        from hoh_cosim.hardware.fse103 import FRAMINGS, encode_frame
         from hoh_cosim.hardware.ft150 import encode_sample
 
         self.setup = setup
@@ -179,9 +189,13 @@ class _World:
         self.pty_slave = slave  # kept open so that the device exists until unplugged
         self.pty_name = os.ttyname(slave)
         self.faults = sorted(setup.faults, key=lambda f: f.at_s)
+        self.injections = injections
+        self.ending: dict[str, float] = {}  # world time at which a fault of that kind ends
         self.ft_stalled = self.protective = self.program_stopped = False
-        self.spike = 0.0
-        self.nan_next = False
+        self.ft_nan = self.nan_next = False
+        self.spike = self.ft_spike = 0.0
+        self.framing = setup.probe_framing
+        self.other_framing = next(f for f in FRAMINGS if f != setup.probe_framing)
         self.outputs = self.plant.initial_outputs()
         self.hand = {"F_hand_B": np.zeros(3), "tau_hand_B": np.zeros(3), "F_tip_B": np.zeros(3)}
         self.p_SH_S = np.asarray(self.plant.params.tool.p_SH_S, dtype=float)
@@ -223,7 +237,9 @@ class _World:
         with contextlib.suppress(OSError):  # BlockingIOError: the buffer is full, nobody reads
             os.write(self.pty_master, data)
 
-    def _fault(self, kind: str) -> None:
+    def _fault(self, kind: str, t: float, duration_s: float = 0.0) -> None:
+        if duration_s > 0.0:
+            self.ending[kind] = t + duration_s
         if kind == "probe_unplug" and self.pty_master is not None:
             os.close(self.pty_master)
             os.close(self.pty_slave)
@@ -234,12 +250,55 @@ class _World:
             self._send_ft(b"(( 1.2 , x7 ) junk \x00\xff ( 3 , 4 )")
         elif kind == "probe_garbage":
             self._send_probe(bytes(range(7, 40)))
+        elif kind == "probe_framing":
+            self.framing, self.other_framing = self.other_framing, self.framing
         elif kind == "ft_nan":
-            self.nan_next = True
+            self.ft_nan = duration_s > 0.0
+            self.nan_next = not self.ft_nan
+        elif kind == "ft_spike":
+            self.ft_spike = 60.0
+        elif kind == "ft_disconnect":
+            # the daemon goes away: the connection closes and new ones are refused until it is back
+            if self.client is not None:
+                self.client.close()
+                self.client = None
+            self.listener.close()
         elif kind == "force_spike":
             self.spike = 40.0
         elif kind == "protective_stop":
             self.protective = True
+
+    def _end(self, kind: str) -> None:
+        """A fault of `kind` with a duration is over: the device is itself again."""
+        if kind == "ft_stall":
+            self.ft_stalled = False
+        elif kind == "probe_framing":
+            self.framing, self.other_framing = self.other_framing, self.framing
+        elif kind == "ft_nan":
+            self.ft_nan = False
+        elif kind == "ft_spike":
+            self.ft_spike = 0.0
+        elif kind == "ft_disconnect":
+            self.listener = socket.create_server((self.setup.ft_host, self.ft_port))
+            self.listener.setblocking(False)
+        elif kind == "force_spike":
+            self.spike = 0.0
+        elif kind == "protective_stop":
+            self.protective = False
+
+    def _faults_due(self, t: float) -> None:
+        while self.faults and self.faults[0].at_s <= t:
+            fault = self.faults.pop(0)
+            self._fault(fault.kind, t, fault.duration_s)
+        if self.injections is not None and round(t / WORLD_DT) % 10 == 0:  # every 10 ms
+            with contextlib.suppress(queue.Empty):
+                while True:
+                    kind, duration_s = self.injections.get_nowait()
+                    self._fault(kind, t, duration_s)
+        for kind, end in list(self.ending.items()):
+            if t >= end:
+                del self.ending[kind]
+                self._end(kind)
 
     # --- the robot's side of the shared memory ------------------------------------------------
 
@@ -306,9 +365,8 @@ class _World:
             self._publish(k * WORLD_DT)
 
     def _tick(self, t: float) -> None:
-        while self.faults and self.faults[0].at_s <= t:
-            self._fault(self.faults.pop(0).kind)
-        if round(t / WORLD_DT) % 20 == 0:  # look for a client every 20 ms
+        self._faults_due(t)
+        if round(t / WORLD_DT) % 20 == 0 and "ft_disconnect" not in self.ending:  # every 20 ms
             self._accept()
         twist = self._command(time.monotonic())
         if self.task_held and self.go:  # the rebias is done: the hand comes in a moment
@@ -330,7 +388,9 @@ class _World:
         ft = self.ft.step(t, WORLD_DT, {"wrench_S_true": self.outputs["wrench_S"]})
         if self.ft.clock.delivered != before:
             values = ft["wrench_S"]
-            if self.nan_next:
+            if self.ft_spike:
+                values = values + np.array([0.0, 0.0, self.ft_spike, 0.0, 0.0, 0.0])
+            if self.nan_next or self.ft_nan:
                 values, self.nan_next = np.full(6, math.nan), False
             self._send_ft(self.encode_sample(values))
         before = self.probe.clock.delivered
@@ -341,7 +401,7 @@ class _World:
                 self.encode_frame(
                     probe["force_P"],
                     int(1e3 * t) & 0xFFFFFFFF,
-                    framing=self.setup.probe_framing,
+                    framing=self.framing,
                     byte_order=self.setup.probe_byte_order,
                 )
             )
@@ -368,9 +428,10 @@ class RehearsalWorld:
         self._state, self._command = SeqLock(self.state), SeqLock(self.command)
         self._ready = context.Queue()
         self._stop = context.Event()
+        self._injections = context.Queue()
         self._process = context.Process(
             target=_world_main,
-            args=(setup, self.state, self.command, self._ready, self._stop),
+            args=(setup, self.state, self.command, self._ready, self._stop, self._injections),
             name="rehearsal-world",
             daemon=True,
         )
@@ -405,6 +466,11 @@ class RehearsalWorld:
         """Let the operator's hand come, TASK_LEAD_S from now (a world set up without
         `task_start_s`; otherwise nothing changes)."""
         self._command.write(np.array([1.0]), slice(10, 11))
+
+    def inject(self, kind: str, duration_s: float = 0.0) -> None:
+        """The fault `kind` now (within the world's next 10 ms), for `duration_s` (0: for good)."""
+        Fault(0.0, kind, duration_s)  # checks the kind and the duration
+        self._injections.put((kind, float(duration_s)))
 
     def robot(self) -> SimulatedRobot:
         return SimulatedRobot(self, 1.0 / self.setup.robot_rate_hz)
