@@ -9,9 +9,9 @@ jitter (how late each cycle began), as p50, p99, p99.9 and max, with the overrun
 more than a period late). Target: p99 jitter <= 0.5 ms and no overruns.
 
 The emulators share this machine's cores with the runner (on a rig they are separate hardware), so
-they run at a lower priority; `--rt-priority` gives the loop and its readers SCHED_FIFO, as a rig's
-configuration would (`robot.realtime_priority`); without the right to it the run says so and goes
-on without.
+they run above it where the system permits (`hoh_cosim.rehearsal.priorities`); `--rt-priority`
+gives the loop and its readers SCHED_FIFO, as a rig's configuration would
+(`robot.realtime_priority`); without the right to it the run says so and goes on without.
 
 To tell the runner's delays from the machine's, the same pacing (same period, same priority) also
 runs bare for `--baseline` seconds, doing nothing but wait for each cycle: a virtual machine whose

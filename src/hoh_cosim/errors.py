@@ -36,3 +36,8 @@ class IdentificationError(HohError, ValueError):
 class RunError(HohError, RuntimeError):
     """The run itself failed (an FMU reported an error, a block raised, an FMU would not build):
     the command line's exit status 1, not 2, since the input was fine."""
+
+
+def io_failure(exc: OSError) -> RunError:
+    """An operating system's error during a run, as one line: the file (or I/O) and the reason."""
+    return RunError(f"{exc.filename or 'I/O'}: {exc.strerror or exc}")

@@ -198,68 +198,9 @@ def test_hw_run_guides_the_emulated_robot_through_ur_rtde(rig, tmp_path):
     assert wait_for(lambda: arm_speed(world) < 1e-9, 1.0)
 
 
-def test_sigkill_mid_motion_the_watchdog_stops_the_arm_and_the_log_is_readable(rig, tmp_path):
-    world, ur, config = rig
-    log = tmp_path / "session.mcap"
-    process = hw_run(config, log)
-    try:
-        assert wait_for(lambda: arm_speed(world) > 0.01, 60.0), "the arm never moved"
-        time.sleep(1.5)
-        killed, killed_unix = time.monotonic(), time.time()
-        process.send_signal(signal.SIGKILL)
-        process.wait(10)
-        assert wait_for(lambda: arm_speed(world) < 1e-9, 1.0 / WATCHDOG_HZ + 0.3)
-        stopped = time.monotonic() - killed
-    finally:
-        process.kill()
-        process.wait(5)
-    assert stopped < 1.0 / WATCHDOG_HZ + 0.3
-    assert ur.said(r"^watchdog: no command for \d+ ms")
-    assert ur.said(r"^program stopped: watchdog")
-    # the log's writer notices that its runner is gone, writes what it has and closes the file
-    assert wait_for(lambda: read_session(log).complete, 10.0)
-    session = read_session(log)
-    assert "end" not in [m["event"] for m in session.messages["/events"]]
-    t = np.array([m["t"] for m in session.messages["/robot"]])
-    assert t.size > 500
-    # up to the last second before the kill. A message's log time is the session's start on the
-    # wall clock plus its cycle's time, so it falls behind the wall clock by the runner's start-up
-    # and by whatever the pacing lost (on a busy machine, seconds): the last cycle logged is timed
-    # by when its FT-150 sample arrived (the monotonic clock), and log times only never run ahead
-    received = session.series("/ft150", "received_s")
-    assert 0.0 < killed - received[-1] < 1.5
-    assert killed_unix - last_log_time(log) > 0.0
-
-
-@pytest.mark.parametrize(
-    ("fault", "cause"),
-    [
-        ("protective_stop", "the robot is in a protective stop"),
-        ("emergency_stop", "the robot is emergency-stopped"),
-        ("drop_connection", "the connection to the controller was lost"),
-    ],
-)
-def test_an_injected_fault_stops_the_runner_and_names_the_cause(rig, tmp_path, fault, cause):
-    world, ur, config = rig
-    log = tmp_path / "session.mcap"
-    process = hw_run(config, log, "--seconds", "30")
-    try:
-        assert wait_for(lambda: ur.said(r"^watchdog"), 60.0)
-        assert wait_for(lambda: arm_speed(world) > 0.005, 30.0)
-        ur.inject(fault)
-    finally:
-        output = finished(process, log, 30)
-    assert cause in output, output + emulator_events(ur)
-    if fault == "drop_connection":
-        # the runner stops and says why; then ur_rtde 1.6.5's own reconnecting thread may abort
-        # the process on its way out ("terminate called ... read: End of file", SIGABRT)
-        assert process.returncode in (1, -signal.SIGABRT, -signal.SIGSEGV), output
-    else:
-        assert process.returncode == 1, output
-    assert wait_for(lambda: arm_speed(world) < 1e-9, 1.0)
-    session = read_session(log)
-    assert session.complete
-    assert cause in session.messages["/events"][-1]["detail"]
+# A SIGKILL mid-motion, a protective or emergency stop and a dropped link are among the faults of
+# `hoh-cosim hw campaign` (tests/integration/test_campaign.py), with stricter checks than a test
+# of each had here: the arm still within a stated bound, the cause, the exit status, the log.
 
 
 def test_ur_rtde_on_a_cb3_runs_at_125_hz(tmp_path):

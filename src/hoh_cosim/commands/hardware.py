@@ -5,6 +5,7 @@
     hoh-cosim hw sensors [--ft HOST[:PORT]] [--probe DEVICE] [--seconds S] [--json]
     hoh-cosim hw rehearse [--seconds S] [--task TASK] [--rate HZ] [--fault KIND@SECONDS ...]
     hoh-cosim hw emulate [--host 127.0.0.1] [--series e|cb3] [--seconds N] [--allow-remote]
+    hoh-cosim hw campaign [--runs N] [--seed S] [--workers W] [--out DIR] [--kinds K,K,...]
     hoh-cosim replay LOG.mcap [--set block.parameter=value ...] [--out DIR]
 
 Exit status as everywhere: 0 done, 2 the input is wrong, 1 the session ended on a fault.
@@ -15,13 +16,16 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import math
+import os
 import signal
 import sys
 from pathlib import Path
 from typing import Any
 
-from hoh_cosim.errors import ConfigError, RunError
+from hoh_cosim.errors import ConfigError, RunError, io_failure
 from hoh_cosim.rehearsal.faults import FAULTS, Fault
+from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 from hoh_cosim.results import check_out_dir, check_writable, replace_dir
 from plant_models.tasks import CONTACT_TASKS, TASKS
 
@@ -40,14 +44,34 @@ def _endpoint(text: str) -> tuple[str, int]:
 
 
 def _fault(text: str) -> Fault:
-    kind, _, at = text.partition("@")
+    kind, _, when = text.partition("@")
+    at, _, duration = when.partition("+")
     try:
-        at_s = float(at)
+        at_s, duration_s = float(at), float(duration or 0.0)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected KIND@SECONDS, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected KIND@SECONDS or KIND@SECONDS+DURATION, got {text!r}"
+        ) from None
     if kind not in FAULTS:
         raise argparse.ArgumentTypeError(f"expected one of {', '.join(FAULTS)}, got {kind!r}")
-    return Fault(at_s, kind)
+    if not (math.isfinite(at_s) and math.isfinite(duration_s) and duration_s >= 0.0):
+        raise argparse.ArgumentTypeError(
+            f"expected finite seconds and a duration >= 0, got {text!r}"
+        )
+    return Fault(at_s, kind, duration_s)
+
+
+def _rt_priority(text: str) -> int | None:
+    """A SCHED_FIFO priority for a loop, 0 for none."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value == 0:
+        return None
+    if not 2 <= value <= 98:  # its helpers run one below; the kernel's own threads at 99
+        raise argparse.ArgumentTypeError(f"expected 0 (none) or 2 to 98, got {text!r}")
+    return value
 
 
 def _add_config(parser: argparse.ArgumentParser) -> None:
@@ -190,9 +214,9 @@ def add_commands(sub: Any) -> None:
         action="append",
         default=[],
         type=_fault,
-        metavar="KIND@S",
-        help=f"schedule a fault at S s of the world's clock, e.g. ft_stall@12 (repeatable); KIND: "
-        f"{', '.join(FAULTS)}",
+        metavar="KIND@S[+D]",
+        help=f"schedule a fault at S s of the world's clock, for D s (default: for good), e.g. "
+        f"ft_stall@12 or ft_stall@12+0.1 (repeatable); KIND: {', '.join(FAULTS)}",
     )
     rehearse.add_argument(
         "--log",
@@ -218,10 +242,58 @@ def add_commands(sub: Any) -> None:
     )
     rehearse.add_argument(
         "--rt-priority",
-        type=int,
-        default=None,
+        type=_rt_priority,
+        default=LOOP_PRIORITY,
         metavar="P",
-        help="SCHED_FIFO priority for the loop (Linux, needs the right)",
+        help="SCHED_FIFO priority for the loop, as a rig's runs, 0 for none (Linux; without the "
+        f"right, a note and the default priority; default: {LOOP_PRIORITY})",
+    )
+
+    campaign = hw_sub.add_parser(
+        "campaign",
+        help="many short rehearsals through hw run, each with random faults, invariants checked",
+        description="Run N short sessions of `hoh-cosim hw run` against the emulated UR controller, "
+        "FT-150 and FSE103, each with one to three faults drawn at random (kind, time, duration) "
+        "from the run's seed (the campaign's seed plus the run's number), and check on each that "
+        "a fault that calls for a stop stops the arm in time, the cause is named, the log is "
+        "complete and valid, and nothing is left running. Writes campaign.csv and summary.json, "
+        "prints a table per fault kind. A failing run is re-run alone with --runs 1 --seed "
+        "<its seed>. Exit status 1 when any run broke an invariant. Needs the hardware extra.",
+    )
+    campaign.add_argument(
+        "--runs", type=int, default=20, metavar="N", help="how many runs (default: 20)"
+    )
+    campaign.add_argument(
+        "--seed", type=int, default=1, metavar="S", help="the first run's seed (default: 1)"
+    )
+    campaign.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        metavar="W",
+        help="runs at once, each with its own world, controller and runner; a run takes about "
+        "a core, so at most half the cores (default: 1)",
+    )
+    campaign.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        help="where campaign.csv, summary.json and each run's files go "
+        "(default: runs/campaign-<time>)",
+    )
+    campaign.add_argument(
+        "--kinds",
+        default=None,
+        metavar="K,K,...",
+        help=f"draw faults of these kinds only (default: all: {', '.join(_campaign_kinds())})",
+    )
+    campaign.add_argument(
+        "--rt-priority",
+        type=_rt_priority,
+        default=LOOP_PRIORITY,
+        metavar="P",
+        help="SCHED_FIFO priority for each runner's loop, 0 for none (Linux; without the right, "
+        f"the default priority; default: {LOOP_PRIORITY})",
     )
 
     emulate = hw_sub.add_parser(
@@ -311,11 +383,8 @@ def _report(result: Any, log_path: Path) -> int:
 def _hw_run(args: argparse.Namespace) -> int:
     from hoh_cosim.calibration import read_calibration
     from hoh_cosim.hardware.config import load_config
-    from hoh_cosim.hardware.fse103 import FSE103Port
-    from hoh_cosim.hardware.ft150 import FT150Stream, zero_sensor
-    from hoh_cosim.hardware.robot import RtdeRobot
-    from hoh_cosim.hardware.runner import Runner
-    from hoh_cosim.hardware.session_log import SessionLog
+    from hoh_cosim.hardware.ft150 import zero_sensor
+    from hoh_cosim.hardware.isolation import in_child
 
     config = load_config(args.config, args.overrides)
     if config.calibration is None:
@@ -325,6 +394,17 @@ def _hw_run(args: argparse.Namespace) -> int:
     check_writable(log_path.parent, "--log" if args.log else f"{config.path}: log_dir")
     if config.ft150.zero_on_start:
         zero_sensor(config.ft150.host)
+    return in_child(lambda: _session(config, calibration, log_path, args.seconds))
+
+
+def _session(config: Any, calibration: Any, log_path: Path, seconds: float | None) -> int:
+    """`hw run`'s session, in the child process of `in_child`."""
+    from hoh_cosim.hardware.fse103 import FSE103Port
+    from hoh_cosim.hardware.ft150 import FT150Stream
+    from hoh_cosim.hardware.robot import RtdeRobot
+    from hoh_cosim.hardware.runner import Runner
+    from hoh_cosim.hardware.session_log import SessionLog
+
     robot = RtdeRobot(
         config.robot.host,
         frequency_hz=config.robot.frequency_hz,
@@ -348,22 +428,29 @@ def _hw_run(args: argparse.Namespace) -> int:
     }
     log = SessionLog(log_path, metadata).start()
     runner = Runner(config, robot, ft, probe, calibration, log, announce=_announce)
-    return _report(runner.run(args.seconds), log_path)
+    return _report(runner.run(seconds), log_path)
 
 
 def _hw_calibrate(args: argparse.Namespace) -> int:
-    from hoh_cosim.calibration import calibration_to_dict
     from hoh_cosim.control.sequencer import SequencerParams
-    from hoh_cosim.hardware.calibrate import calibrate, save
     from hoh_cosim.hardware.config import load_config
-    from hoh_cosim.hardware.ft150 import FT150Stream
-    from hoh_cosim.hardware.robot import RtdeRobot
+    from hoh_cosim.hardware.isolation import in_child
 
     config = load_config(args.config)
     out = Path(args.out) if args.out else config.calibration
     if out is None:
         raise ConfigError(f"{config.path}: calibration: missing: give --out FILE")
     params = SequencerParams(tilts=args.tilts, directions=args.directions)
+    return in_child(lambda: _calibration(config, params, args.samples, out))
+
+
+def _calibration(config: Any, params: Any, samples: int, out: Path) -> int:
+    """`hw calibrate`'s motion and identification, in the child process of `in_child`."""
+    from hoh_cosim.calibration import calibration_to_dict
+    from hoh_cosim.hardware.calibrate import calibrate, save
+    from hoh_cosim.hardware.ft150 import FT150Stream
+    from hoh_cosim.hardware.robot import RtdeRobot
+
     robot = RtdeRobot(
         config.robot.host,
         frequency_hz=config.robot.frequency_hz,
@@ -375,7 +462,7 @@ def _hw_calibrate(args: argparse.Namespace) -> int:
         ft,
         R_TS=config.robot.R_TS,
         params=params,
-        samples=args.samples,
+        samples=samples,
         acceleration=config.robot.acceleration,
         announce=_announce,
     )
@@ -441,6 +528,78 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     result = rehearse(setup, announce=_announce)
     print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
     return _report(result.session, log_path)
+
+
+def _campaign_kinds() -> tuple[str, ...]:
+    # the kinds, without importing the campaign's machinery for --help
+    return (
+        "ft_stall",
+        "ft_garbage",
+        "ft_nan",
+        "ft_spike",
+        "ft_disconnect",
+        "probe_unplug",
+        "probe_garbage",
+        "probe_framing",
+        "force_spike",
+        "protective_stop",
+        "emergency_stop",
+        "rtde_drop",
+        "program_stopped",
+        "runner_kill",
+        "cpu_hog",
+    )
+
+
+def _hw_campaign(args: argparse.Namespace) -> int:
+    import shutil
+
+    from hoh_cosim.rehearsal import campaign
+
+    for name, value in (("--runs", args.runs), ("--workers", args.workers)):
+        if value < 1:
+            raise ConfigError(f"{name}: expected a whole number >= 1, got {value}")
+    kinds = tuple(campaign.KINDS)
+    if args.kinds is not None:
+        kinds = tuple(k.strip() for k in args.kinds.split(",") if k.strip())
+        unknown = [k for k in kinds if k not in campaign.KINDS]
+        if unknown or not kinds:
+            raise ConfigError(
+                f"--kinds: expected some of {', '.join(campaign.KINDS)}, got {args.kinds!r}"
+            )
+    out = Path(args.out) if args.out else Path("runs") / f"campaign-{_stamp()}"
+    check_out_dir(out, marker="campaign.csv", what="campaign")
+    check_writable(out, "--out")
+    if (out / "campaign.csv").is_file():  # an earlier campaign: replaced whole
+        for old in [*out.glob("run-*"), out / "campaign.csv", out / "summary.json"]:
+            if old.is_dir():
+                shutil.rmtree(old)
+            else:
+                old.unlink(missing_ok=True)
+
+    cores = os.cpu_count() or 1
+    if args.workers > max(1, cores // 2):
+        print(
+            f"note: a run takes about a core while it runs; {args.workers} workers on {cores} "
+            "cores overload the machine, and runs may stop on their neighbours' load"
+        )
+
+    def tell(run: campaign.Run) -> None:
+        verdict = "ok" if not run.violations else "VIOLATION: " + "; ".join(run.violations)
+        faults = " ".join(f.text() for f in run.faults)
+        print(f"run {run.number} (seed {run.seed}) {faults}: {run.cause or 'done'}; {verdict}")
+
+    runs = campaign.run_campaign(
+        args.runs, args.seed, args.workers, out, kinds, args.rt_priority, announce=tell
+    )
+    summary = campaign.summarise(runs, args.seed)
+    campaign.write_results(runs, summary, out)
+    print(campaign.table(summary))
+    for failed in summary["failed_runs"]:
+        only = f" --kinds {','.join(kinds)}" if args.kinds is not None else ""
+        print(f"re-run alone: hoh-cosim hw campaign --runs 1 --seed {failed['seed']}{only}")
+    print(f"wrote {out / 'campaign.csv'} and {out / 'summary.json'}")
+    return 1 if summary["violations"] else 0
 
 
 def _loopback(host: str) -> bool:
@@ -546,10 +705,11 @@ def run_command(args: argparse.Namespace) -> int | None:
         "sensors": _hw_sensors,
         "rehearse": _hw_rehearse,
         "emulate": _hw_emulate,
+        "campaign": _hw_campaign,
     }
     if args.hw_command not in handlers:
         raise ConfigError("hw: expected a command: " + ", ".join(handlers))
     try:
         return handlers[args.hw_command](args)
     except OSError as exc:
-        raise RunError(f"{exc.filename or 'I/O'}: {exc.strerror or exc}") from None
+        raise io_failure(exc) from None

@@ -1,0 +1,97 @@
+"""The fault campaign: `hoh-cosim hw campaign` as a user runs it, and its checker caught lying.
+
+Each run is the real `hoh-cosim hw run` through ur-rtde against the loopback UR controller, the
+FT-150 stream and the FSE103 of the rehearsal world, with faults drawn from the run's seed.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import subprocess
+import sys
+
+import pytest
+
+from hoh_cosim.rehearsal import campaign
+from tests.xdist_groups import REAL_TIME
+
+pytestmark = REAL_TIME
+
+
+def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
+    # five runs whose first faults are the robot's and the machine's own (seeds 10 to 14: emergency
+    # stop, dropped link, program stopped, runner killed, CPU hog), each with up to two more of any
+    # kind; the campaign of every kind is the README's, too long for the suite
+    out = tmp_path / "campaign"
+    done = subprocess.run(
+        [
+            *(sys.executable, "-m", "hoh_cosim", "hw", "campaign", "--runs", "5", "--seed", "10"),
+            *("--out", str(out)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
+    assert summary["runs"] == 5
+    assert summary["violations"] == 0, summary["failed_runs"]
+    kinds = tuple(campaign.KINDS)
+    firsts = {"emergency_stop", "rtde_drop", "program_stopped", "runner_kill", "cpu_hog"}
+    assert {kinds[seed % len(kinds)] for seed in range(10, 15)} == firsts
+    assert all(summary["kinds"][kind]["injected"] >= 1 for kind in firsts)
+    rows = list(csv.DictReader((out / "campaign.csv").read_text().splitlines()))
+    assert [int(r["run"]) for r in rows] == list(range(5))
+    # a run's faults are its seed's alone: what `--runs 1 --seed <seed>` would draw again
+    for row in rows:
+        drawn = campaign.draw_faults(int(row["seed"]), kinds)
+        assert row["faults"] == " ".join(f.text() for f in drawn)
+    # every stop was timed and kept its bound; the table says so
+    stopped = [r for r in rows if r["expected"] == "stop"]
+    assert stopped
+    assert all(float(r["fault_to_standstill_ms"]) <= float(r["bound_ms"]) for r in stopped)
+    assert "fault to standstill p50 / p99 / max" in done.stdout
+    assert f"wrote {out / 'campaign.csv'}" in done.stdout
+
+
+def test_the_checker_reports_a_run_that_does_not_do_what_its_fault_calls_for(tmp_path, monkeypatch):
+    # garbage in the FT-150 stream calls for no stop: told that it does, the checker must object
+    lying = dataclasses.replace(campaign.KINDS["ft_garbage"], stops=lambda duration_s: True)
+    monkeypatch.setitem(campaign.KINDS, "ft_garbage", lying)
+    (run,) = campaign.run_campaign(1, 7, 1, tmp_path, kinds=("ft_garbage",))
+    assert run.returncode == 0, run.cause
+    assert any(v.startswith("no stop after ft_garbage") for v in run.violations), run.violations
+
+
+def test_faults_are_drawn_from_the_seed_alone():
+    kinds = tuple(campaign.KINDS)
+    assert campaign.draw_faults(41, kinds) == campaign.draw_faults(41, kinds)
+    firsts = {campaign.draw_faults(seed, kinds)[0].kind for seed in range(100, 100 + len(kinds))}
+    assert firsts == set(kinds)
+    for seed in range(200):
+        faults = campaign.draw_faults(seed, kinds)
+        assert 1 <= len(faults) <= 3
+        assert [f.at_s for f in faults] == sorted(f.at_s for f in faults)
+        assert all(campaign.FIRST_S <= f.at_s <= campaign.LAST_S for f in faults)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--runs", "0"], "--runs: expected a whole number >= 1, got 0"),
+        (["--kinds", "ft_stall,meteor"], "--kinds: expected some of ft_stall"),
+    ],
+)
+def test_bad_options_get_one_line_and_status_2(tmp_path, args, message):
+    done = subprocess.run(
+        [sys.executable, "-m", "hoh_cosim", "hw", "campaign", "--out", str(tmp_path / "c"), *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert message in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "c" / "campaign.csv").exists()
