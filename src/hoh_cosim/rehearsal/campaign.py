@@ -314,7 +314,8 @@ class _Hog:
 
 
 def _session_members(sid: int) -> list[int]:
-    """The processes of process session `sid` (Linux /proc), the session's leader included."""
+    """The live processes of process session `sid` (Linux /proc), the session's leader included.
+    A zombie has ended: only its parent, or init for an orphan, has yet to collect its status."""
     members = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
@@ -325,7 +326,7 @@ def _session_members(sid: int) -> list[int]:
             continue
         # pid (comm) state ppid pgrp session ...: comm may hold spaces and brackets
         fields = stat[stat.rfind(")") + 2 :].split()
-        if len(fields) > 3 and int(fields[3]) == sid:
+        if len(fields) > 3 and int(fields[3]) == sid and fields[0] != "Z":
             members.append(int(entry.name))
     return members
 
