@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import socket
 import subprocess
 import sys
 
@@ -95,3 +96,20 @@ def test_bad_options_get_one_line_and_status_2(tmp_path, args, message):
     assert message in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "c" / "campaign.csv").exists()
+
+
+def test_a_run_moves_to_another_address_when_its_own_is_taken_meanwhile(monkeypatch):
+    # another program listens on the address after the lease looked at it (forced here: the lease
+    # sees every address as free): the controller cannot listen, and the run takes the next one
+    from hoh_cosim.rehearsal.world import WorldSetup
+
+    hosts = campaign._Hosts()
+    taken = hosts._candidates[0]
+    monkeypatch.setattr(campaign, "_free", lambda host: True)
+    with socket.socket() as squatter:
+        squatter.bind((taken, 29999))
+        squatter.listen()
+        with campaign._rig(hosts, WorldSetup(task="circle", task_start_s=None)) as (host, _, ur):
+            assert host != taken
+            assert ur.said("^listening")
+    assert taken not in hosts._candidates

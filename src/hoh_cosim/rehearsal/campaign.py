@@ -375,7 +375,14 @@ class _Hosts:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._taken: set[str] = set()
-        self._candidates = [f"127.0.{a}.{b}" for a in range(100, 110) for b in range(2, 255)]
+        candidates = [f"127.0.{a}.{b}" for a in range(100, 110) for b in range(2, 255)]
+        start = (os.getpid() * 97) % len(candidates)  # two campaigns at once seldom meet
+        self._candidates = candidates[start:] + candidates[:start]
+
+    def spoil(self, host: str) -> None:
+        """Never lease `host` again: another program listens there."""
+        with self._lock:
+            self._candidates.remove(host)
 
     @contextlib.contextmanager
     def lease(self) -> Iterable[str]:
@@ -409,12 +416,35 @@ def _wait(predicate: Callable[[], bool], timeout_s: float, step_s: float = 0.01)
     return True
 
 
+@contextlib.contextmanager
+def _rig(hosts: _Hosts, setup, attempts: int = 5):
+    """A run's world and UR controller, on a loopback address that was free: another program (a
+    second campaign, a test) may take it between the check and the controller's listening, and
+    then the next address is tried."""
+    from hoh_cosim.rehearsal.ur_controller import UrController
+    from hoh_cosim.rehearsal.world import RehearsalWorld
+
+    for attempt in range(attempts):
+        with hosts.lease() as host, RehearsalWorld(setup) as world:
+            try:
+                ur = UrController(world, host).start()
+            except RuntimeError as exc:
+                if "Address already in use" not in str(exc) or attempt == attempts - 1:
+                    raise
+                hosts.spoil(host)
+                continue
+            try:
+                yield host, world, ur
+            finally:
+                ur.stop()
+            return
+
+
 def run_one(
     number: int, seed: int, kinds: Sequence[str], out: Path, hosts: _Hosts, rt_priority: int | None
 ) -> Run:
     """Run `number` of a campaign: its faults drawn from `seed`, its files under out/run-NNNN."""
-    from hoh_cosim.rehearsal.ur_controller import UrController
-    from hoh_cosim.rehearsal.world import RehearsalWorld, WorldSetup
+    from hoh_cosim.rehearsal.world import WorldSetup
 
     run = Run(number, seed, draw_faults(seed, kinds))
     started = time.monotonic()
@@ -424,7 +454,7 @@ def run_one(
     output = directory / "runner.out"
     setup = WorldSetup(task="circle", task_start_s=None, seed=seed, watchdog_hz=WATCHDOG_HZ)
     hogs: list[_Hog] = []
-    with hosts.lease() as host, RehearsalWorld(setup) as world, UrController(world, host) as ur:
+    with _rig(hosts, setup) as (host, world, ur):
         config = _write_rig(directory, world, host, rt_priority)
         monitor = _Monitor(world)
         monitor.start()
@@ -618,7 +648,11 @@ def run_campaign(
     done: list[Run] = []
 
     def one(number: int) -> Run:
-        run = run_one(number, seed + number, kinds, out, hosts, rt_priority)
+        try:
+            run = run_one(number, seed + number, kinds, out, hosts, rt_priority)
+        except Exception as exc:  # the run's own finding; the campaign goes on
+            run = Run(number, seed + number, draw_faults(seed + number, kinds))
+            run.violations.append(f"the run failed: {type(exc).__name__}: {exc}")
         announce(run)
         return run
 
