@@ -10,7 +10,6 @@ dashboard's `is in remote control`.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import signal
 import socket
@@ -26,12 +25,11 @@ import pytest
 import rtde_control
 import rtde_receive
 
-from hoh_cosim.calibration import write_calibration
 from hoh_cosim.control.supervisor import STOP_FLAGS, Status
 from hoh_cosim.hardware.robot import RtdeRobot
 from hoh_cosim.hardware.session_log import read_session
 from hoh_cosim.rehearsal import rtde_protocol as rtde
-from hoh_cosim.rehearsal.rehearse import truth_calibration
+from hoh_cosim.rehearsal.rehearse import write_truth_calibration
 from hoh_cosim.rehearsal.ur_controller import UrController, wait_for
 from hoh_cosim.rehearsal.world import RehearsalWorld, WorldSetup
 from tests.rtde_guide_client import GuideClient
@@ -68,18 +66,7 @@ def next_host() -> str:
 
 
 def write_config(tmp_path: Path, world: RehearsalWorld, host: str) -> Path:
-    # the world's truth, as a perfect `hoh-cosim hw calibrate` would write it
-    zeros = np.zeros(6)
-    calibration = dataclasses.replace(
-        truth_calibration(world.truth),
-        n_poses=32,
-        condition_number=1.0,
-        residual_rms_before=zeros,
-        residual_max_before=zeros,
-        residual_rms_after=zeros,
-        residual_max_after=zeros,
-    )
-    write_calibration(tmp_path / "calibration.json", calibration)
+    write_truth_calibration(world.truth, tmp_path / "calibration.json")
     config = tmp_path / "rig.yaml"
     config.write_text(
         f"robot: {{host: {host}, watchdog_hz: {WATCHDOG_HZ}}}\n"

@@ -70,3 +70,10 @@ def test_a_teleecho_scenario_has_one_of_the_teleecho_kinds(
     scenario = load_scenario(SCENARIOS / file)
     assert scenario.component_of_kinds(TELEECHO_ARMS).kind.name == arm
     assert scenario.component_of_kinds(TELEECHO_CONTROLLERS).kind.name == controller
+
+
+def test_the_campaign_defines_exactly_the_kinds_the_command_line_names() -> None:
+    from hoh_cosim.rehearsal.campaign import KINDS as CAMPAIGN
+    from hoh_cosim.rehearsal.faults import CAMPAIGN_KINDS
+
+    assert tuple(CAMPAIGN) == CAMPAIGN_KINDS  # the order too: it decides each seed's first fault

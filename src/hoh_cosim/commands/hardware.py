@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from hoh_cosim.errors import ConfigError, RunError, io_failure
-from hoh_cosim.rehearsal.faults import FAULTS, Fault
+from hoh_cosim.rehearsal.faults import CAMPAIGN_KINDS, FAULTS, Fault
 from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 from hoh_cosim.results import check_out_dir, check_writable, replace_dir
 from plant_models.tasks import CONTACT_TASKS, TASKS
@@ -72,6 +72,17 @@ def _rt_priority(text: str) -> int | None:
     if not 2 <= value <= 98:  # its helpers run one below; the kernel's own threads at 99
         raise argparse.ArgumentTypeError(f"expected 0 (none) or 2 to 98, got {text!r}")
     return value
+
+
+def _add_rt_priority(parser: argparse.ArgumentParser, loop: str) -> None:
+    parser.add_argument(
+        "--rt-priority",
+        type=_rt_priority,
+        default=LOOP_PRIORITY,
+        metavar="P",
+        help=f"SCHED_FIFO priority for {loop}, as a rig's runs, 0 for none (Linux; without the "
+        f"right, a note and the default priority; default: {LOOP_PRIORITY})",
+    )
 
 
 def _add_config(parser: argparse.ArgumentParser) -> None:
@@ -240,14 +251,7 @@ def add_commands(sub: Any) -> None:
             "(e.g. 127.0.0.1; ports 29999, 30003, 30004) instead of shared memory"
         ),
     )
-    rehearse.add_argument(
-        "--rt-priority",
-        type=_rt_priority,
-        default=LOOP_PRIORITY,
-        metavar="P",
-        help="SCHED_FIFO priority for the loop, as a rig's runs, 0 for none (Linux; without the "
-        f"right, a note and the default priority; default: {LOOP_PRIORITY})",
-    )
+    _add_rt_priority(rehearse, "the loop")
 
     campaign = hw_sub.add_parser(
         "campaign",
@@ -285,16 +289,9 @@ def add_commands(sub: Any) -> None:
         "--kinds",
         default=None,
         metavar="K,K,...",
-        help=f"draw faults of these kinds only (default: all: {', '.join(_campaign_kinds())})",
+        help=f"draw faults of these kinds only (default: all: {', '.join(CAMPAIGN_KINDS)})",
     )
-    campaign.add_argument(
-        "--rt-priority",
-        type=_rt_priority,
-        default=LOOP_PRIORITY,
-        metavar="P",
-        help="SCHED_FIFO priority for each runner's loop, 0 for none (Linux; without the right, "
-        f"the default priority; default: {LOOP_PRIORITY})",
-    )
+    _add_rt_priority(campaign, "each runner's loop")
 
     emulate = hw_sub.add_parser(
         "emulate",
@@ -528,27 +525,6 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     result = rehearse(setup, announce=_announce)
     print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
     return _report(result.session, log_path)
-
-
-def _campaign_kinds() -> tuple[str, ...]:
-    # the kinds, without importing the campaign's machinery for --help
-    return (
-        "ft_stall",
-        "ft_garbage",
-        "ft_nan",
-        "ft_spike",
-        "ft_disconnect",
-        "probe_unplug",
-        "probe_garbage",
-        "probe_framing",
-        "force_spike",
-        "protective_stop",
-        "emergency_stop",
-        "rtde_drop",
-        "program_stopped",
-        "runner_kill",
-        "cpu_hog",
-    )
 
 
 def _hw_campaign(args: argparse.Namespace) -> int:

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import dataclasses
 import json
 import math
 import os
@@ -341,20 +340,9 @@ def _dashboard(host: str, command: str) -> str:
 
 
 def _write_rig(directory: Path, world, host: str, rt_priority: int | None) -> Path:
-    from hoh_cosim.calibration import write_calibration
-    from hoh_cosim.rehearsal.rehearse import truth_calibration
+    from hoh_cosim.rehearsal.rehearse import write_truth_calibration
 
-    zeros = np.zeros(6)
-    calibration = dataclasses.replace(
-        truth_calibration(world.truth),
-        n_poses=32,
-        condition_number=1.0,
-        residual_rms_before=zeros,
-        residual_max_before=zeros,
-        residual_rms_after=zeros,
-        residual_max_after=zeros,
-    )
-    write_calibration(directory / "calibration.json", calibration)
+    write_truth_calibration(world.truth, directory / "calibration.json")
     priority = "" if rt_priority is None else f", realtime_priority: {rt_priority}"
     config = directory / "rig.yaml"
     config.write_text(

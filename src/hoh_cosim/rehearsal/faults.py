@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["FAULTS", "Fault"]
+__all__ = ["CAMPAIGN_KINDS", "FAULTS", "Fault"]
 
 FAULTS = (
     "probe_unplug",
@@ -36,6 +36,28 @@ FAULTS = (
     "ft_disconnect",
     "protective_stop",
 )
+
+CAMPAIGN_KINDS = (
+    "ft_stall",
+    "ft_garbage",
+    "ft_nan",
+    "ft_spike",
+    "ft_disconnect",
+    "probe_unplug",
+    "probe_garbage",
+    "probe_framing",
+    "force_spike",
+    "protective_stop",
+    "emergency_stop",
+    "rtde_drop",
+    "program_stopped",
+    "runner_kill",
+    "cpu_hog",
+)
+"""The kinds of fault `hw campaign` draws from, in its order (a run's first fault is
+CAMPAIGN_KINDS[seed % n]; `rehearsal.campaign.KINDS` says what each calls for): the world's, then
+the UR controller's, the dashboard's, a killed runner and a CPU hog. Here, so that the command
+line names them without importing the campaign."""
 
 
 @dataclass(frozen=True)

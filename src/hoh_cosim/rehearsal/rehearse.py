@@ -38,7 +38,14 @@ from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 from hoh_cosim.rehearsal.ur_controller import UrController
 from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
 
-__all__ = ["Rehearsal", "RehearsalResult", "rehearsal_config", "rehearse", "truth_calibration"]
+__all__ = [
+    "Rehearsal",
+    "RehearsalResult",
+    "rehearsal_config",
+    "rehearse",
+    "truth_calibration",
+    "write_truth_calibration",
+]
 
 # the UR series a robot rate stands for, when the arm sits behind the emulated UR controller
 UR_SERIES = {500.0: "e", 125.0: "cb3"}
@@ -65,6 +72,24 @@ def truth_calibration(truth: dict) -> GravityCalibration:
         residual_rms_after=np.concatenate([nan3, nan3]),
         residual_max_after=np.concatenate([nan3, nan3]),
     )
+
+
+def write_truth_calibration(truth: dict, path: Path) -> None:
+    """`truth_calibration` as a perfect `hoh-cosim hw calibrate` would write it for a rig file: a
+    file holds a pose count, a condition number and residuals, here the seed's 32 poses, 1 and 0."""
+    from hoh_cosim.calibration import write_calibration
+
+    zeros = np.zeros(6)
+    calibration = dataclasses.replace(
+        truth_calibration(truth),
+        n_poses=32,
+        condition_number=1.0,
+        residual_rms_before=zeros,
+        residual_max_before=zeros,
+        residual_rms_after=zeros,
+        residual_max_after=zeros,
+    )
+    write_calibration(path, calibration)
 
 
 def rehearsal_config(
