@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from hoh_cosim.control.frames import (
     R_BL_EQ3,
@@ -103,6 +104,31 @@ def test_rotvec_matches_rodrigues(rng):
         K = skew(r / theta)
         rodrigues = np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
         np.testing.assert_allclose(rotvec_to_matrix(r), rodrigues, atol=1e-13)
+
+
+def test_rotvec_of_a_matrix_equals_scipys_to_the_bit(rng):
+    # random rotations, products like the servo loops form, and the edge cases of the
+    # quaternion's four branches and of the small-angle series (1 mrad)
+    matrices = list(Rotation.random(2000, random_state=7).as_matrix())
+    for angle in (0.0, 1e-12, 1e-6, 0.999e-3, 1e-3, 1.001e-3, 0.5, math.pi / 2, math.pi - 1e-8):
+        for _ in range(20):
+            axis = rng.normal(size=3)
+            matrices.append(rotvec_to_matrix(angle * axis / np.linalg.norm(axis)))
+    for _ in range(200):
+        A, B = Rotation.random(2, random_state=int(rng.integers(1 << 30))).as_matrix()
+        matrices.append(A @ B.T)
+    matrices += [np.eye(3), Rx(math.pi), Ry(math.pi), Rz(math.pi)]
+    for R in matrices:
+        np.testing.assert_array_equal(matrix_to_rotvec(R), Rotation.from_matrix(R).as_rotvec())
+
+
+def test_rotvec_of_a_matrix_that_is_no_rotation_is_scipys_too():
+    almost = Rz(0.3) + 1e-9  # scipy orthogonalises it first
+    np.testing.assert_array_equal(
+        matrix_to_rotvec(almost), Rotation.from_matrix(almost).as_rotvec()
+    )
+    with pytest.raises(ValueError, match="determinant"):
+        matrix_to_rotvec(np.diag([1.0, 1.0, -1.0]))
 
 
 angles = st.floats(-math.pi, math.pi, allow_nan=False)

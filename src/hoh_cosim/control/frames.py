@@ -49,8 +49,65 @@ def rotvec_to_matrix(r: npt.ArrayLike) -> Rot3:
 
 
 def matrix_to_rotvec(R: npt.ArrayLike) -> Vec3:
-    """Rotation vector (axis · angle, angle in [0, π]) of the rotation matrix `R`."""
-    return Rotation.from_matrix(np.asarray(R, dtype=np.float64).reshape(3, 3)).as_rotvec()
+    """Rotation vector (axis · angle, angle in [0, π]) of the rotation matrix `R`.
+
+    scipy's `Rotation.from_matrix(R).as_rotvec()` written out in floats for a rotation (rows
+    orthonormal as scipy checks them, det > 0), the case of every control loop here: that call
+    costs 100-150 µs, this one a few. The quaternion comes from the largest of R₀₀, R₁₁, R₂₂ and
+    tr R (Shepperd's choice, as scipy makes it), is normalised and put in the half with w >= 0;
+    then angle = 2 atan2(|q_xyz|, w) and r = q_xyz · angle / sin(angle/2), or the series
+    2 + angle²/12 + 7 angle⁴/2880 for that factor below 1 mrad. Anything else (a matrix scipy would
+    orthogonalise, or refuse) goes to scipy itself.
+    """
+    R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+    if not _is_rotation(r00, r01, r02, r10, r11, r12, r20, r21, r22):
+        return Rotation.from_matrix(R).as_rotvec()
+    trace = r00 + r11 + r22
+    best = max(r00, r11, r22, trace)  # the first of equals, as argmax picks it
+    if best == r00:
+        q = (1.0 - trace + 2.0 * r00, r10 + r01, r20 + r02, r21 - r12)
+    elif best == r11:
+        q = (r10 + r01, 1.0 - trace + 2.0 * r11, r21 + r12, r02 - r20)
+    elif best == r22:
+        q = (r20 + r02, r21 + r12, 1.0 - trace + 2.0 * r22, r10 - r01)
+    else:
+        q = (r21 - r12, r02 - r20, r10 - r01, 1.0 + trace)
+    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    x, y, z, w = (c / norm for c in q)
+    if w < 0.0 or (w == 0.0 and (x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0))))):
+        x, y, z, w = -x, -y, -z, -w
+    angle = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), w)
+    if angle <= 1e-3:
+        angle2 = angle * angle
+        scale = 2.0 + angle2 / 12.0 + 7.0 * angle2 * angle2 / 2880.0
+    else:
+        scale = angle / math.sin(angle / 2.0)
+    return np.array([scale * x, scale * y, scale * z])
+
+
+def _is_rotation(*m: float) -> bool:
+    """Whether the row-major 3x3 `m` is what scipy takes as a rotation without change: det > 0 and
+    R Rᵀ within 1e-12 + 1e-5·I of I elementwise (numpy's `isclose` with atol 1e-12)."""
+    r0, r1, r2 = m[0:3], m[3:6], m[6:9]
+    det = (
+        r0[0] * (r1[1] * r2[2] - r1[2] * r2[1])
+        - r0[1] * (r1[0] * r2[2] - r1[2] * r2[0])
+        + r0[2] * (r1[0] * r2[1] - r1[1] * r2[0])
+    )
+    if not det > 0.0:
+        return False
+    rows = (r0, r1, r2)
+    for i in range(3):
+        for j in range(i, 3):
+            a, b = rows[i], rows[j]
+            gram = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+            if i == j:
+                if not abs(gram - 1.0) <= 1e-12 + 1e-5:
+                    return False
+            elif not abs(gram) <= 1e-12:
+                return False
+    return True
 
 
 def euler_zyx_to_matrix(z: float, y: float, x: float) -> Rot3:
