@@ -68,6 +68,7 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
                         "1",
                         "--nworkers",
                         "1",
+                        "--no-nanny",  # one process each, which stops at once on SIGTERM
                         "--host",
                         "127.0.0.1",
                         "--no-dashboard",

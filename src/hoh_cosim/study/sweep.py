@@ -41,6 +41,7 @@ import itertools
 import json
 import math
 import os
+import socket
 import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -247,6 +248,7 @@ def _run_on_dask(
             client = Client(cluster)
         else:
             try:
+                _refused(scheduler)
                 client = Client(scheduler, timeout=10)
             except (OSError, TimeoutError) as exc:
                 raise ConfigError(
@@ -264,6 +266,18 @@ def _run_on_dask(
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def _refused(scheduler: str) -> None:
+    """Raise OSError at once when nothing listens at a tcp:// address: Dask's client would retry
+    it for its whole timeout. Other addresses, and a port that answers, are left to Dask."""
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(scheduler)
+    if parts.scheme != "tcp" or not parts.hostname or parts.port is None:
+        return
+    with socket.create_connection((parts.hostname, parts.port), timeout=5.0):
+        pass
 
 
 # -- sweep files ---------------------------------------------------------------------------------
