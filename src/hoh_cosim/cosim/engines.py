@@ -474,9 +474,16 @@ def _run(
     values[0] = outputs
     events = deque(sorted(scenario.events, key=lambda e: e.time_s))
     by_name = {rt.spec.name: rt for rt in runtimes}
+    # the components due at each tick of the pattern that repeats every `cycle` ticks, in order
+    # (at most one entry per tick of the run: a pattern longer than the run is never repeated)
+    cycle = min(math.lcm(*(rt.spec.every for rt in runtimes)), max(scenario.n_ticks, 1))
     plan = [
-        (rt, rt.spec.every, rt.spec.every * dt, gather[i], rt.in_buf)
-        for i, rt in enumerate(runtimes)
+        [
+            (rt, rt.spec.every * dt, gather[i], rt.in_buf)
+            for i, rt in enumerate(runtimes)
+            if phase % rt.spec.every == 0
+        ]
+        for phase in range(cycle)
     ]
     spans = [
         (rt.spec.every, columns[f"{rt.spec.name}.{rt.spec.outputs[0].name}"].start, rt.out.size)
@@ -493,10 +500,9 @@ def _run(
             while events and events[0].time_s <= t + 0.5 * dt:
                 event = events.popleft()
                 by_name[event.component].retune(event.params, event.changes)
-            for rt, every, step, index, buf in plan:
-                if k % every == 0:
-                    take(index, out=buf)
-                    rt.step(t, step)
+            for rt, step, index, buf in plan[k % cycle]:
+                take(index, out=buf)
+                rt.step(t, step)
             if jacobi:
                 for every, at, size in spans:
                     if (k + shift) % every == 0:
