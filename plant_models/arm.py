@@ -93,10 +93,17 @@ class ArmParams:
             )
 
 
-def damped_least_squares(J: Vec, twist: Vec, threshold: float, max_damping: float) -> Vec:
+def damped_least_squares(
+    J: Vec, twist: Vec, threshold: float, max_damping: float, sigma_min: float | None = None
+) -> Vec:
     """q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ ξ with λ² = (1 - (σ_min/ε)²) λ_max² below σ_min = ε, else 0
-    (then it is the plain solution J⁻¹ξ of a square J)."""
-    sigma_min = float(np.linalg.svd(J, compute_uv=False)[-1])
+    (then it is the plain solution J⁻¹ξ of a square J).
+
+    `sigma_min`: σ_min(J) when the caller has it, or any lower bound of it that is >= ε (then only
+    the comparison with ε uses it); computed by SVD when None.
+    """
+    if sigma_min is None:
+        sigma_min = float(np.linalg.svd(J, compute_uv=False)[-1])
     if sigma_min >= threshold and J.shape[0] == J.shape[1]:
         return np.linalg.solve(J, twist)
     lam2 = 0.0
@@ -105,15 +112,34 @@ def damped_least_squares(J: Vec, twist: Vec, threshold: float, max_damping: floa
     return J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(J.shape[0]), twist)
 
 
-def _step_towards(current: Vec, target: Vec, max_step: float) -> Vec:
+def _step_towards(current: Vec, target: Vec, max_step_v: float, max_step_w: float) -> Vec:
+    """The twist `target` if within reach of `current`, else `current` moved towards it by at most
+    `max_step_v` in v and `max_step_w` in ω: current + δ · max_step/|δ| with δ = target - current."""
     delta = target - current
-    n = math.sqrt(float(delta @ delta))
-    return target if n <= max_step else current + delta * (max_step / n)
+    d_v, d_w = delta[:3], delta[3:]
+    n_v, n_w = math.sqrt(d_v.dot(d_v)), math.sqrt(d_w.dot(d_w))
+    if n_v <= max_step_v and n_w <= max_step_w:
+        return target
+    c, d = current.tolist(), delta.tolist()
+    v = target[:3] if n_v <= max_step_v else [c[i] + d[i] * (max_step_v / n_v) for i in range(3)]
+    w = target[3:] if n_w <= max_step_w else [c[i] + d[i] * (max_step_w / n_w) for i in range(3, 6)]
+    return np.concatenate((v, w))
+
+
+_JOINTS = range(6)
 
 
 class SpeedLArm:
     """Joint state of the UR5 under speedL; `cycle(command)` at each robot cycle, `advance(dt)`
-    every tick in between."""
+    every tick in between.
+
+    The joint state is kept in floats and published after every change as one new array `state`,
+    [q; q̇; q̈_mean], of which `q`, `qd` and `qdd_mean` are views; a published array is never written.
+    """
+
+    # Headroom of the SVD-free test σ_min >= ε in `_joint_velocities`: far above the error of
+    # LAPACK's singular values (a few ulp of σ_max) and of the distance's rounding
+    _WEYL_MARGIN = 1e-9
 
     def __init__(self, params: ArmParams, model: UR5Model, tcp: str = "tcp") -> None:
         self.params = params
@@ -123,45 +149,86 @@ class SpeedLArm:
         self.reset()
 
     def reset(self) -> None:
-        self.q = self.params.q0.copy()
-        self.qd = np.zeros(6)
+        self._q = self.params.q0.tolist()
+        self._qd = [0.0] * 6
+        self._qdd = [0.0] * 6  # the cycle's constant joint acceleration while its ramp lasts
+        self._publish(self._qdd)
         self.qdd = np.zeros(6)
         self.robot_twist = np.zeros(6)  # the twist the robot is tracking, after the ramp
         self._queue = [np.zeros(6) for _ in range(self.params.latency_cycles)]
         self.active = np.zeros(6)
         self._ramp_left = 0.0
-        self.qdd_mean = np.zeros(6)
+        self._svd_at: tuple[Vec, float, float] | None = None  # (J, σ_min, σ_max) of the last SVD
+        # (what the last computed cycle depended on, what it set)
+        self._cycled: tuple[tuple[bytes, ...], tuple[Any, ...]] | None = None
+
+    def _publish(self, qdd_mean: list[float]) -> None:
+        """New arrays for the joint state: those handed out before keep their values."""
+        self.state = np.array(self._q + self._qd + qdd_mean)
+        self.q, self.qd, self.qdd_mean = self.state[:6], self.state[6:12], self.state[12:]
 
     def cycle(self, command: Vec) -> None:
         """A robot cycle starts: take the (delayed) command, ramp, solve for joint velocities."""
         p = self.params
         self._queue.append(np.array(command, dtype=np.float64))
-        self.active = self._queue.pop(0)
+        self.active = active = self._queue.pop(0)
         T = self.period
-        v = _step_towards(self.robot_twist[:3], self.active[:3], p.acceleration * T)
-        w = _step_towards(self.robot_twist[3:], self.active[3:], p.angular_acceleration * T)
-        self.robot_twist = np.concatenate([v, w])
-        J = self.model.jacobian(self.q, self.tcp)
-        qd = damped_least_squares(J, self.robot_twist, p.dls_threshold, p.dls_max_damping)
-        peak = float(np.max(np.abs(qd)))
-        if peak > p.joint_speed_limit:
-            qd = qd * (p.joint_speed_limit / peak)
-        # no joint past its limit by the end of the cycle (mean velocity over the ramp)
-        q_end = self.q + 0.5 * (self.qd + qd) * T
-        lim = p.joint_position_limit
-        over = (q_end > lim) & (qd > 0.0) | (q_end < -lim) & (qd < 0.0)
-        if over.any():
-            qd = np.where(over, 0.0, qd)
-        self.qdd = (qd - self.qd) / T
         self._ramp_left = T
+        # all the cycle depends on: the command, the twist tracked, q and q̇ (an arm holding still
+        # gets the same cycle again)
+        key = (active.tobytes(), self.robot_twist.tobytes(), self.state[:12].tobytes())
+        if self._cycled is not None and self._cycled[0] == key:
+            self.robot_twist, self._qdd, self.qdd = self._cycled[1]
+            return
+        self.robot_twist = _step_towards(
+            self.robot_twist, active, p.acceleration * T, p.angular_acceleration * T
+        )
+        J = self.model.jacobian(self.q, self.tcp)
+        qd = self._joint_velocities(J, self.robot_twist).tolist()
+        peak = max(map(abs, qd))
+        if math.isnan(sum(qd)) and any(math.isnan(x) for x in qd):
+            peak = math.nan  # as numpy's max (the builtin passes over a NaN after the first entry)
+        if peak > p.joint_speed_limit:
+            s = p.joint_speed_limit / peak
+            qd = [x * s for x in qd]
+        # no joint past its limit by the end of the cycle (mean velocity over the ramp)
+        q, qd0, lim = self._q, self._qd, p.joint_position_limit
+        q_end = [q[i] + 0.5 * (qd0[i] + qd[i]) * T for i in _JOINTS]
+        qd = [
+            0.0 if (q_end[i] > lim and qd[i] > 0.0) or (q_end[i] < -lim and qd[i] < 0.0) else qd[i]
+            for i in _JOINTS
+        ]
+        self._qdd = [(qd[i] - qd0[i]) / T for i in _JOINTS]
+        self.qdd = np.array(self._qdd)
+        self._cycled = (key, (self.robot_twist, self._qdd, self.qdd))
+
+    def _joint_velocities(self, J: Vec, twist: Vec) -> Vec:
+        """`damped_least_squares`, without the SVD when Weyl's inequality already shows σ_min >= ε
+        from the last SVD's J₀: σ_min(J) >= σ_min(J₀) - ‖J - J₀‖₂ >= σ_min(J₀) - ‖J - J₀‖_F (the same
+        decision, so the same q̇)."""
+        p = self.params
+        if self._svd_at is not None and J.shape[0] == J.shape[1]:
+            J0, sigma_min0, sigma_max0 = self._svd_at
+            dJ = (J - J0).ravel()
+            bound = sigma_min0 - math.sqrt(dJ.dot(dJ))
+            if bound >= p.dls_threshold + self._WEYL_MARGIN * sigma_max0:
+                return damped_least_squares(J, twist, p.dls_threshold, p.dls_max_damping, bound)
+        sigma = np.linalg.svd(J, compute_uv=False)
+        self._svd_at = (J, float(sigma[-1]), float(sigma[0]))
+        return damped_least_squares(J, twist, p.dls_threshold, p.dls_max_damping, float(sigma[-1]))
 
     def advance(self, dt: float) -> None:
         """Integrate over dt: the cycle's constant joint acceleration until its ramp ends, then
         constant velocity (exact either way)."""
         ramp = min(dt, self._ramp_left)
-        self.q = self.q + self.qd * dt + self.qdd * (0.5 * ramp * ramp + ramp * (dt - ramp))
-        self.qd = self.qd + self.qdd * ramp
-        self.qdd_mean = self.qdd * (ramp / dt)  # the mean over this step: what the tool felt
+        c = 0.5 * ramp * ramp + ramp * (dt - ramp)
+        q, qd, qdd = self._q, self._qd, self._qdd
+        self._q = [q[i] + qd[i] * dt + qdd[i] * c for i in _JOINTS]
+        self._qd = [qd[i] + qdd[i] * ramp for i in _JOINTS]
+        # the mean over this step, what the tool felt: q̈ ramp/dt (q̈ itself when the ramp lasts)
+        k = ramp / dt
+        self._publish(qdd if ramp == dt else [a * k for a in qdd])
         self._ramp_left -= ramp
         if self._ramp_left <= 0.0:
+            self._qdd = [0.0] * 6
             self.qdd = np.zeros(6)

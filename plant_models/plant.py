@@ -7,6 +7,8 @@ force sensors plus the contact force itself (the sensor blocks add their imperfe
 
 The UR5 is position controlled and stiff: the hand and the phantom do not move it, they only load the
 sensors. A step advances from t to t + dt with the inputs held, and returns the outputs at t + dt.
+The outputs are a function of the arm's state and the loads: an arm holding still under the same
+loads gets the same arrays again, and the same kinematics under other loads.
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ from plant_models.tool import ToolLoads, ToolModel
 from plant_models.ur5 import FramePlacement, UR5Model
 
 __all__ = ["Plant", "PlantParams"]
+
+# entries of a raveled 4x4 [[R_BX, p_BX_B], [0, 1]]: p_BX_B, then R_BX row by row
+_POSE_ENTRIES = np.array([3, 7, 11, 0, 1, 2, 4, 5, 6, 8, 9, 10])
 
 
 @dataclass(frozen=True)
@@ -82,11 +87,22 @@ class Plant:
     def reset(self) -> None:
         self.arm.reset()
         self._cycle = -1
-        self._outputs = self._evaluate(np.zeros(3), np.zeros(3), np.zeros(3))
+        self._params_changed()
+        self._evaluate(np.zeros(3), np.zeros(3), np.zeros(3))
+
+    def _params_changed(self) -> None:
+        """Take what the evaluation needs from the parameters, and forget the last evaluation."""
+        tool = self.params.tool
+        self._p_SK_S = tool.cable.p_SK_S if tool.cable.enabled else None
+        self._probe_mass = tool.probe_mass_kg > 0.0
+        # what the last evaluation was of: the arm's state (bytes of `arm.state`) and the loads
+        self._kinematics_at: tuple[bytes, tuple[Any, ...]] | None = None
+        self._evaluated_at: tuple[bytes, ...] | None = None
 
     def retune(self, params: PlantParams) -> None:
         """New parameters while running (only the phantom may change)."""
         self.params = params
+        self._params_changed()
 
     def initial_outputs(self) -> dict[str, Vec]:
         """The outputs at t = 0, before any step: the arm at rest at q0."""
@@ -96,60 +112,98 @@ class Plant:
         # every robot cycle that starts within the step, with the command held over the step: a
         # step of any length gives what steps of 1 ms give
         arm, left = self.arm, dt
+        period = arm.period
         while True:
-            cycle = math.floor(t / arm.period + 1e-9)
+            cycle = math.floor(t / period + 1e-9)
             if cycle != self._cycle:
                 self._cycle = cycle
                 arm.cycle(inputs["twist_cmd_B"])
-            boundary = (cycle + 1) * arm.period
-            if boundary >= t + left - 1e-9 * arm.period:  # the same tolerance as the floor's
+            boundary = (cycle + 1) * period
+            if boundary >= t + left - 1e-9 * period:  # the same tolerance as the floor's
                 arm.advance(left)
                 break
             arm.advance(boundary - t)
             left, t = t + left - boundary, boundary
-        self._outputs = self._evaluate(inputs["F_hand_B"], inputs["tau_hand_B"], inputs["F_tip_B"])
-        return self._outputs
+        return self._evaluate(inputs["F_hand_B"], inputs["tau_hand_B"], inputs["F_tip_B"])
 
     @property
     def outputs_now(self) -> dict[str, Vec]:
         """The outputs at the current time (after reset: at t = 0), without stepping."""
         return self._outputs
 
-    def _evaluate(self, F_hand_B: Vec3, tau_hand_B: Vec3, F_tip_B: Vec3) -> dict[str, Vec]:
-        p = self.params
-        m = self.model
+    def _kinematics(self, state: bytes) -> tuple[Any, ...]:
+        """What the tool's frames do at the arm's state `state` (the bytes of `arm.state`):
+        (p_BT_B, R_BT row by row, twist_B, p_BS_B, R_BS row by row, R_BS, [a_C; α] of the tool's
+        centre of mass, ω, p_BK_B or None, a_P_B or None), in B. Computed once per state: an arm at
+        rest keeps its arrays (the block contract lets a block return the same arrays again)."""
+        at = self._kinematics_at
+        if at is not None and at[0] == state:
+            return at[1]
         arm = self.arm
+        m = self.model
         m.update(arm.q, arm.qd, arm.qdd_mean)
-        p_BT, R_BT = m.placement("tcp")
-        p_BS, R_BS = m.placement("ft_sensor")
+        pose_T = m.homogeneous("tcp").take(_POSE_ENTRIES)  # [p_BT_B; R_BT]
+        pose_S = m.homogeneous("ft_sensor").take(_POSE_ENTRIES)
         twist = m.twist("tcp")
-        contact = contact_force(p.phantom, p_BT, twist[:3])
-        acc_C = m.acceleration("tool_com")
-        omega = twist[3:]
-        p_BK = p_BS + R_BS @ p.tool.cable.p_SK_S if p.tool.cable.enabled else None
-        a_P = m.acceleration("probe_sensor")[:3] if p.tool.probe_mass_kg > 0.0 else None
+        a_C = m.acceleration("tool_com").tolist()  # [a_C; α]
+        p_BS, R_BS_rows = pose_S[:3], pose_S[3:]
+        R_BS = R_BS_rows.reshape(3, 3)
+        kinematics = (
+            pose_T[:3],
+            pose_T[3:],
+            twist,
+            p_BS,
+            R_BS_rows,
+            R_BS,
+            a_C,
+            twist[3:].tolist(),  # ω
+            None if self._p_SK_S is None else p_BS + R_BS @ self._p_SK_S,  # p_BK
+            m.acceleration("probe_sensor")[:3] if self._probe_mass else None,  # a_P
+        )
+        self._kinematics_at = (state, kinematics)
+        return kinematics
+
+    def _evaluate(self, F_hand_B: Vec3, tau_hand_B: Vec3, F_tip_B: Vec3) -> dict[str, Vec]:
+        """The outputs at the arm's state under these loads, kept in `_outputs`; the same state and
+        loads as the last evaluation give the same arrays again, in a new dict."""
+        key = (
+            self.arm.state.tobytes(),
+            F_hand_B.tobytes(),
+            tau_hand_B.tobytes(),
+            F_tip_B.tobytes(),
+        )
+        if key == self._evaluated_at:
+            return dict(self._outputs)
+        kinematics = self._kinematics(key[0])
+        p_BT, R_BT, twist, p_BS, R_BS_rows, R_BS, a_C, omega, p_BK, a_P = kinematics
+        contact = contact_force(self.params.phantom, p_BT, twist[:3])
         # a push on the tip loads both sensors as a contact does
+        c0, c1, c2 = contact.force_B.tolist()
+        t0, t1, t2 = F_tip_B.tolist()
         wrench_S, force_P = self._loads.readings(
             R_BS,
-            acc_C[:3],
+            a_C[:3],
             omega,
-            acc_C[3:],
-            F_hand_B,
-            tau_hand_B,
-            contact.force_B + F_tip_B,
+            a_C[3:],
+            F_hand_B.tolist(),
+            tau_hand_B.tolist(),
+            [c0 + t0, c1 + t1, c2 + t2],
             p_BK,
             a_P,
         )
-        return {
+        depth = contact.depth
+        self._evaluated_at = key
+        self._outputs = {
             "p_BT_B": p_BT,
-            "R_BT": R_BT.reshape(9),
+            "R_BT": R_BT,
             "twist_B": twist,
-            "q": arm.q,
-            "qd": arm.qd,
+            "q": self.arm.q,
+            "qd": self.arm.qd,
             "p_BS_B": p_BS,
-            "R_BS": R_BS.reshape(9),
+            "R_BS": R_BS_rows,
             "wrench_S": wrench_S,
             "force_P": force_P,
             "F_contact_B": contact.force_B,
-            "penetration": np.array([contact.depth if math.isfinite(contact.depth) else -1.0]),
+            "penetration": np.array([depth if math.isfinite(depth) else -1.0]),
         }
+        return self._outputs

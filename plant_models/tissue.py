@@ -102,13 +102,13 @@ def surface_depth(params: PhantomParams, p_B: Vec3) -> tuple[float, Vec3]:
     """Penetration depth of the point p (positive inside) and the outward normal there."""
     if params.shape == "plane":
         n = params.plane_normal_B
-        return float((params.plane_point_B - p_B) @ n), n
+        return float((params.plane_point_B - p_B).dot(n)), n
     if params.shape == "ellipsoid":
         axes = params.ellipsoid_axes
         u = (p_B - params.ellipsoid_center_B) / axes
-        f = float(u @ u) - 1.0
+        f = float(u.dot(u)) - 1.0
         grad = 2.0 * u / axes
-        g = math.sqrt(float(grad @ grad))
+        g = math.sqrt(grad.dot(grad))
         if g == 0.0:  # at the centre: deepest; any direction
             return float(np.min(axes)), np.array([0.0, 0.0, 1.0])
         return -f / g, grad / g
@@ -120,13 +120,19 @@ def contact_force(params: PhantomParams, p_B: Vec3, v_B: Vec3) -> Contact:
     depth, n = surface_depth(params, p_B)
     if depth <= 0.0:
         return Contact(_NO_FORCE, depth, n)
-    depth_rate = -float(v_B @ n)
+    v_n = float(v_B.dot(n))
+    depth_rate = -v_n
     spring = params.stiffness * depth**params.exponent
     F_n = max(0.0, spring * (1.0 + 1.5 * params.damping * depth_rate))
-    force = F_n * n
-    v_t = v_B - (v_B @ n) * n
-    speed = math.sqrt(float(v_t @ v_t))
+    # F = F_n n - (μ F_n tanh(|v_t|/v_s)/|v_t| + b) v_t  with  v_t = v - (v·n) n
+    n0, n1, n2 = n.tolist()
+    v0, v1, v2 = v_B.tolist()
+    t0, t1, t2 = v0 - v_n * n0, v1 - v_n * n1, v2 - v_n * n2
+    force = [F_n * n0, F_n * n1, F_n * n2]
+    v_t = np.array((t0, t1, t2))
+    speed = math.sqrt(v_t.dot(v_t))
     if speed > 0.0:
         friction = params.friction * F_n * math.tanh(speed / params.stiction_velocity)
-        force = force - (friction / speed + params.viscous_friction) * v_t
-    return Contact(force, depth, n)
+        c = friction / speed + params.viscous_friction
+        force = [force[0] - c * t0, force[1] - c * t1, force[2] - c * t2]
+    return Contact(np.array(force), depth, n)

@@ -159,54 +159,85 @@ class ToolLoads:
     def __init__(self, tool: ToolModel, g_B: Vec3) -> None:
         self.tool = tool
         self.g_B = np.asarray(g_B, dtype=np.float64)
+        self._g_B_floats = tuple(self.g_B.tolist())
         self._arms = np.hstack([skew(tool.p_SH_S), skew(tool.p_ST_S), skew(tool.p_SC_S)])
         self._inertia_floats = tuple(tool.inertia_C_S.tolist())
         self._R_PS = tool.R_SP.T.copy()
+        self._make_scratch()
+
+    def _make_scratch(self) -> None:
+        """The rows in B and in S, and views of them, written by every reading (no result refers
+        to them)."""
+        self._rows_B = np.empty((6, 3))
+        self._rows_B_flat = self._rows_B.reshape(18)
+        self._rows_S = np.empty((6, 3))
+        self._forces_S = self._rows_S[:3].reshape(9)  # F_hand, F_contact, m (g - a_C)
+        self._F_contact_S = self._rows_S[1]
+
+    # A copy (pickle, deepcopy: an FMU's state) would turn the views into arrays of their own:
+    # copies are made without the scratch, which is made anew.
+    _SCRATCH = ("_rows_B", "_rows_B_flat", "_rows_S", "_forces_S", "_F_contact_S")
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items() if k not in self._SCRATCH}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._make_scratch()
 
     def readings(
         self,
         R_BS: Rot3,
-        a_C_B: Vec3,
-        omega_B: Vec3,
-        alpha_B: Vec3,
-        F_hand_B: Vec3,
-        tau_hand_B: Vec3,
-        F_contact_B: Vec3,
+        a_C_B: Vec3 | list[float],
+        omega_B: Vec3 | list[float],
+        alpha_B: Vec3 | list[float],
+        F_hand_B: Vec3 | list[float],
+        tau_hand_B: Vec3 | list[float],
+        F_contact_B: Vec3 | list[float],
         p_BK_B: Vec3 | None = None,
         a_P_B: Vec3 | None = None,
     ) -> tuple[np.ndarray, Vec3]:
         """(wrench of the tool on the wrist sensor in S, force of the probe on the probe sensor in P).
 
         The probe sensor carries the contact force and the weight and inertia of the probe part below
-        it (`probe_mass_kg`, accelerating with `a_P_B`).
+        it (`probe_mass_kg`, accelerating with `a_P_B`). The 3-vectors may be arrays or lists of
+        floats (lists are faster).
         """
         tool = self.tool
-        body_B = tool.mass_kg * (self.g_B - a_C_B)
-        F_cable_B = None
-        if tool.cable.enabled and p_BK_B is not None:
-            F_cable_B = cable_force_B(tool.cable, p_BK_B, self.g_B)
+        m = tool.mass_kg
+        gx, gy, gz = self._g_B_floats
+        a0, a1, a2 = a_C_B
         # rows turned into S in one product: v_S = R_BSᵀ v_B  <=>  row_S = row_B R_BS
-        rows_S = np.array([F_hand_B, F_contact_B, body_B, tau_hand_B, omega_B, alpha_B]) @ R_BS
-        f = rows_S[:3].sum(axis=0)
-        F_c, tau_h = rows_S[1], rows_S[3]
+        self._rows_B_flat[:] = [
+            *F_hand_B,
+            *F_contact_B,
+            m * (gx - a0),  # m (g - a_C)
+            m * (gy - a1),
+            m * (gz - a2),
+            *tau_hand_B,
+            *omega_B,
+            *alpha_B,
+        ]
+        rows_S = self._rows_B.dot(R_BS, self._rows_S)
+        (h0, h1, h2), (c0, c1, c2), (b0, b1, b2), (t0, t1, t2), (wx, wy, wz), (ax, ay, az) = (
+            rows_S.tolist()
+        )
+        f0, f1, f2 = h0 + c0 + b0, h1 + c1 + b1, h2 + c2 + b2
+        r0, r1, r2 = self._arms.dot(self._forces_S).tolist()
         # I α + ω × I ω with the diagonal inertia of S, in plain floats (three components)
         ix, iy, iz = self._inertia_floats
-        wx, wy, wz = rows_S[4].tolist()
-        ax, ay, az = rows_S[5].tolist()
-        inertial = (
-            ix * ax + (iz - iy) * wy * wz,
-            iy * ay + (ix - iz) * wz * wx,
-            iz * az + (iy - ix) * wx * wy,
-        )
-        tau = tau_h + self._arms @ rows_S[:3].reshape(9) - inertial
-        if F_cable_B is not None:
-            F_k = R_BS.T @ F_cable_B
-            f = f + F_k
-            tau = tau + cross3(tool.cable.p_SK_S, F_k)
-        wrench_S = np.concatenate([f, tau])
+        tau0 = t0 + r0 - (ix * ax + (iz - iy) * wy * wz)
+        tau1 = t1 + r1 - (iy * ay + (ix - iz) * wz * wx)
+        tau2 = t2 + r2 - (iz * az + (iy - ix) * wx * wy)
+        if tool.cable.enabled and p_BK_B is not None:
+            k0, k1, k2 = (R_BS.T @ cable_force_B(tool.cable, p_BK_B, self.g_B)).tolist()
+            f0, f1, f2 = f0 + k0, f1 + k1, f2 + k2
+            k0, k1, k2 = cross3(tool.cable.p_SK_S, (k0, k1, k2)).tolist()
+            tau0, tau1, tau2 = tau0 + k0, tau1 + k1, tau2 + k2
+        wrench_S = np.array((f0, f1, f2, tau0, tau1, tau2))
 
-        F_P_S = F_c  # the contact force, already in S
+        F_P_S = self._F_contact_S  # the contact force, already in S
         if tool.probe_mass_kg > 0.0:
             a = np.zeros(3) if a_P_B is None else a_P_B
             F_P_S = F_P_S + R_BS.T @ (tool.probe_mass_kg * (self.g_B - a))
-        return wrench_S, self._R_PS @ F_P_S
+        return wrench_S, self._R_PS.dot(F_P_S)

@@ -144,7 +144,8 @@ class FramePlacement:
 class UR5Model:
     """A pinocchio model of the UR5 with extra frames fixed to the flange (sensors, tool, tip).
 
-    Per-call cost matters here: the plant calls `update` on every tick.
+    Per-call cost matters here: the plant calls `update` on every tick, then reads only the frames it
+    needs (a frame's placement is computed when it is read).
     """
 
     def __init__(self, tool_frames: tuple[FramePlacement, ...] = ()) -> None:
@@ -164,13 +165,19 @@ class UR5Model:
         self.nq = self.model.nq
 
     def update(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
-        """Kinematics, velocities and accelerations of every frame at (q, q̇, q̈)."""
+        """Kinematics, velocities and accelerations of every joint at (q, q̇, q̈); the frames' are
+        read from them by the methods below."""
         self.pin.forwardKinematics(self.model, self.data, q, v, a)
-        self.pin.updateFramePlacements(self.model, self.data)
+
+    def homogeneous(self, frame: str) -> np.ndarray:
+        """[[R_BX, p_BX_B], [0, 1]] of a frame after `update`, as a fresh 4x4 array."""
+        return self.pin.updateFramePlacement(
+            self.model, self.data, self.frame_ids[frame]
+        ).homogeneous
 
     def placement(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
-        """(p_BX_B, R_BX) of a frame after `update`."""
-        H = self.data.oMf[self.frame_ids[frame]].homogeneous  # a fresh 4x4 array
+        """(p_BX_B, R_BX) of a frame after `update` (views of a fresh 4x4 array)."""
+        H = self.homogeneous(frame)
         return H[:3, 3], H[:3, :3]
 
     def twist(self, frame: str) -> np.ndarray:
