@@ -268,8 +268,9 @@ def make_filter_bank(params: EstimatorParams) -> FilterBank:
 
 
 class _SensorChannel:
-    """One sensor's packets: a new one when its counter changes, non-finite ones rejected and
-    counted, the time of the last good one, and the running mean that rebiases the sensor."""
+    """One sensor's packets: a new one when its counter changes (the estimator compares the input
+    with `counter` and calls `arrived`), non-finite ones rejected and counted, the time of the last
+    good one, and the running mean that rebiases the sensor."""
 
     def __init__(self, counter_port: str, value_port: str, rebias_packets: int, given: Vec) -> None:
         self.counter_port = counter_port
@@ -289,14 +290,11 @@ class _SensorChannel:
         self._total = np.zeros_like(self.given)
         self.bias: Vec | None = self.given.copy() if self.rebias_packets == 0 else None
 
-    def new_packet(self, t: float, inputs: Mapping[str, Vec]) -> Vec | None:
-        """The values of this tick's packet if it is new and finite, else None."""
-        counter = float(inputs[self.counter_port][0])
-        if counter == self.counter:
-            return None
-        self.counter = counter
+    def arrived(self, t: float, counter: float, inputs: Mapping[str, Vec]) -> Vec | None:
+        """The values of a packet whose counter differs from the last one, None if not finite."""
+        self.counter = float(counter)
         values = inputs[self.value_port]
-        if not math.isfinite(float(values.sum())):
+        if not _finite_sum(values):
             self.rejected += 1
             return None
         self.t_last = t
@@ -313,7 +311,21 @@ class _SensorChannel:
         return None
 
 
+def _finite_sum(values: Vec) -> bool:
+    """Whether `values.sum()` is finite: a packet with a NaN or an infinity is not.
+
+    Σ|vᵢ| < 1e308 bounds every partial sum, in any order, below the largest double, so the sum is
+    finite; anything else (a NaN, an infinity, values near the largest double) asks the sum itself.
+    """
+    if sum(map(abs, values.tolist())) < 1e308:
+        return True
+    return math.isfinite(float(values.sum()))
+
+
 _F = ("N", "N", "N")
+_ZERO3 = frozen(np.zeros(3))
+_FLAG = (frozen([0.0]), frozen([1.0]))
+"""The one-value outputs 0 and 1, indexed by a bool: returned again and again, never written to."""
 
 
 class Estimator:
@@ -359,7 +371,10 @@ class Estimator:
             "probe_counter", "force_P", p.probe_rebias_packets, p.probe_bias
         )
         self._shift_torque = bool(np.any(p.p_SR_S != 0.0))
+        self._use_probe = p.use_probe
+        self._R_SP = p.R_SP
         self._R_PS = p.R_SP.T.copy()
+        self._drift_threshold_N = p.probe_correction.mismatch_threshold_N
         self.correction = ProbeCorrection(p.probe_correction)
         self._consistency = ContactConsistency(p.probe_correction, p.p_SR_S)
         self.reset()
@@ -369,14 +384,24 @@ class Estimator:
         self._ft.reset()
         self._probe.reset()
         self.correction.reset()
-        self._consistency.reset()
         self._t0: float | None = None
-        self._F_meas_S = np.zeros(3)
+        # rows: F_hand, τ_hand, F_probe and F_meas in S, turned into B by one product each tick;
+        # the last row holds the latest compensated wrist force between packets
+        self._in_S = np.zeros((4, 3))
         self._m_P = np.zeros(3)
         self._f_P = np.zeros(3)
         self._check_until: float | None = None
         self._checking = False
+        self._rejected = 0
+        self._rejected_out = _FLAG[False]
+        self._reset_mismatch()
         self._update_ready()
+
+    def _reset_mismatch(self) -> None:
+        """The consistency check starts again: its mismatch, and the output that holds it, are 0."""
+        self._consistency.reset()
+        self._mismatch = 0.0
+        self._mismatch_out = _FLAG[False]
 
     def start_rebias(self) -> None:
         """Take the next N packets of each sensor as the new offset (nobody may touch the tool);
@@ -384,7 +409,7 @@ class Estimator:
         self._ft.restart_rebias()
         self._probe.restart_rebias()
         self._filters.reset()
-        self._consistency.reset()
+        self._reset_mismatch()
         self._check_until = None
         self._update_ready()
 
@@ -437,26 +462,32 @@ class Estimator:
     def _probe_packet(self, f: Vec3, R_BS: Rot3) -> Vec3 | None:
         """The compensated force of a new FSE103 packet, or None while rebiasing."""
         if self._probe_weight is not None:
-            f = f - self._probe_weight.weight_S(R_BS @ self.params.R_SP)[:3]
+            f = f - self._probe_weight.weight_S(R_BS.dot(self._R_SP))[:3]
         return self._probe.debiased(f)
 
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         if self._t0 is None:
             self._t0 = t
         R_BS = inputs["R_BS"].reshape(3, 3)
+        ft, probe = self._ft, self._probe
 
-        w = self._ft.new_packet(t, inputs)
-        ft_z = None if w is None else self._ft_packet(w, R_BS)
-        if ft_z is not None:
-            self._F_meas_S = ft_z[:3]
+        ft_z = None
+        counter = inputs[ft.counter_port][0]
+        if counter != ft.counter:
+            w = ft.arrived(t, counter, inputs)
+            ft_z = None if w is None else self._ft_packet(w, R_BS)
+            if ft_z is not None:
+                self._in_S[3] = ft_z[:3]
         probe_z = None
-        if self.params.use_probe:
-            f = self._probe.new_packet(t, inputs)
-            probe_z = None if f is None else self._probe_packet(f, R_BS)
-            probe_age = t - (self._t0 if self._probe.t_last is None else self._probe.t_last)
+        if self._use_probe:
+            counter = inputs[probe.counter_port][0]
+            if counter != probe.counter:
+                f = probe.arrived(t, counter, inputs)
+                probe_z = None if f is None else self._probe_packet(f, R_BS)
+            probe_age = t - (self._t0 if probe.t_last is None else probe.t_last)
         else:
             probe_age = 0.0
-        ft_age = t - (self._t0 if self._ft.t_last is None else self._ft.t_last)
+        ft_age = t - (self._t0 if ft.t_last is None else ft.t_last)
         if not self._ready:
             self._update_ready(t)
         if probe_z is not None:
@@ -464,47 +495,59 @@ class Estimator:
             # corrected before it is learnt from: the output is the prediction, never the reference
             probe_z = self._f_P = self.correction.correct(probe_z)
             if self._checking:
-                self.correction.reference(t, self._m_P, self._R_PS @ self._F_meas_S)
+                self.correction.reference(t, self._m_P, self._R_PS.dot(self._in_S[3]))
+        rejected = ft.rejected + probe.rejected
+        if rejected != self._rejected:
+            self._rejected = rejected
+            self._rejected_out = np.array([float(rejected)])
 
-        mismatch, drift = 0.0, False
-        if self._ready:
-            if ft_z is not None:
-                measurements = (ft_z[:3], ft_z[3:], probe_z)
-            else:
-                measurements = (None, None, probe_z)
-            F_S, tau_S, F_P = self._filters.step_bank(dt, measurements).reshape(3, 3)
-            F_probe_S = self.params.R_SP @ F_P
-            if self.params.use_probe:
-                if ft_z is not None:
-                    self._consistency.step(t, F_S, tau_S, F_probe_S)
-                mismatch, drift = self._consistency.mismatch, self._consistency.drifted
-            # one product turns all four vectors into B: columns F_hand, τ_hand, F_probe, F_meas
-            # as rows: v_B = R_BS v_S  <=>  row_B = row_S R_BSᵀ
-            in_S = np.array([F_S, tau_S, F_probe_S, self._F_meas_S])
-            F_hand_B, tau_hand_B, F_probe_B, F_meas_B = in_S @ R_BS.T
-            if not self.params.use_probe:
-                F_probe_B = np.zeros(3)
-            ready = 1.0
+        # the one-value outputs that change only on an event (a rejected packet, the probe check,
+        # a consistency step) are held: the same array again until the value changes
+        if not self._ready:
+            return {
+                "F_hand_B": _ZERO3,
+                "tau_hand_B": _ZERO3,
+                "F_probe_B": _ZERO3,
+                "F_hand_meas_B": R_BS.dot(self._in_S[3]),
+                "ft_age": np.array([ft_age]),
+                "probe_age": np.array([probe_age]),
+                "ready": _FLAG[False],
+                "rejected_packets": self._rejected_out,
+                "F_probe_meas_P": self._m_P,
+                "F_probe_corr_P": self._f_P,
+                "probe_check": _FLAG[self._checking],
+                "probe_mismatch": _FLAG[False],
+                "probe_drift": _FLAG[False],
+            }
+
+        if ft_z is None:
+            forces = self._filters.step_bank(dt, (None, None, probe_z))
         else:
-            F_hand_B = np.zeros(3)
-            tau_hand_B = np.zeros(3)
-            F_probe_B = np.zeros(3)
-            F_meas_B = R_BS @ self._F_meas_S
-            ready = 0.0
-
+            forces = self._filters.step_bank(dt, (ft_z[:3], ft_z[3:], probe_z))
+        in_S = self._in_S  # rows F_hand, τ_hand, F_probe (filtered), F_meas (held), in S
+        in_S[:2] = forces[:6].reshape(2, 3)
+        self._R_SP.dot(forces[6:], out=in_S[2])  # F_probe_S = R_SP F_P
+        if ft_z is not None and self._use_probe:
+            mismatch = self._consistency.step(t, in_S[0], in_S[1], in_S[2])
+            if mismatch != self._mismatch:
+                self._mismatch = mismatch
+                self._mismatch_out = np.array([mismatch])
+        # one product turns all four vectors into B: columns F_hand, τ_hand, F_probe, F_meas
+        # as rows: v_B = R_BS v_S  <=>  row_B = row_S R_BSᵀ
+        in_B = in_S.dot(R_BS.T)
         return {
-            "F_hand_B": F_hand_B,
-            "tau_hand_B": tau_hand_B,
-            "F_probe_B": F_probe_B,
-            "F_hand_meas_B": F_meas_B,
+            "F_hand_B": in_B[0],
+            "tau_hand_B": in_B[1],
+            "F_probe_B": in_B[2] if self._use_probe else _ZERO3,
+            "F_hand_meas_B": in_B[3],
             "ft_age": np.array([ft_age]),
             "probe_age": np.array([probe_age]),
-            "ready": np.array([ready]),
-            "rejected_packets": np.array([float(self.rejected_packets)]),
-            # held: replaced, never written into, when a packet arrives
+            "ready": _FLAG[True],
+            "rejected_packets": self._rejected_out,
+            # held too: replaced, never written into, when a probe packet arrives
             "F_probe_meas_P": self._m_P,
             "F_probe_corr_P": self._f_P,
-            "probe_check": np.array([1.0 if self._checking else 0.0]),
-            "probe_mismatch": np.array([mismatch]),
-            "probe_drift": np.array([1.0 if drift else 0.0]),
+            "probe_check": _FLAG[self._checking],
+            "probe_mismatch": self._mismatch_out,
+            "probe_drift": _FLAG[self._mismatch > self._drift_threshold_N],
         }

@@ -101,8 +101,12 @@ class GravityModel:
         self._skew_p = skew(tool.p_SC_S)
 
     def weight_S(self, R_BS: Rot3) -> Wrench:
-        f_S = R_BS.T @ self._mg_B
-        return np.concatenate([f_S, self._skew_p @ f_S])
+        """f_S = R_BSᵀ · m · g_B ;  τ_S = [p_SC_S]× f_S (`ndarray.dot`: the BLAS routine of `@`,
+        without its overhead on 3x3 arrays)."""
+        w_S = np.empty(6)
+        f_S = R_BS.T.dot(self._mg_B, out=w_S[:3])
+        self._skew_p.dot(f_S, out=w_S[3:])
+        return w_S
 
 
 def compensate_gravity(

@@ -37,12 +37,13 @@ share and cannot be told apart from the wrist alone: only the probe check identi
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_vector, cross3, frozen
+from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_vector, frozen
 from hoh_cosim.errors import ConfigError
 
 __all__ = [
@@ -109,8 +110,9 @@ def network_forward(weights: Vec, m: Vec3) -> Vec3:
 
 def features(m: Vec3) -> Vec:
     """φ(m) of the online map."""
-    m = np.asarray(m, dtype=np.float64)
-    return np.concatenate([m, m * np.abs(m) / _QUADRATIC_SCALE_N, [1.0]])
+    m0, m1, m2 = np.asarray(m, dtype=np.float64).tolist()
+    s = _QUADRATIC_SCALE_N
+    return np.array([m0, m1, m2, m0 * abs(m0) / s, m1 * abs(m1) / s, m2 * abs(m2) / s, 1.0])
 
 
 def map_update(
@@ -122,9 +124,9 @@ def map_update(
 
         eᵢ = f_ref,i - θᵢᵀφ,  sᵢ = φᵀPᵢφ + r,  kᵢ = Pᵢφ / sᵢ,  θᵢ ← θᵢ + kᵢ eᵢ,  Pᵢ ← Pᵢ - kᵢ kᵢᵀ sᵢ
     """
-    e = np.asarray(f_ref, dtype=np.float64) - theta.T @ phi
+    e = np.asarray(f_ref, dtype=np.float64) - theta.T.dot(phi)
     Pphi = P @ phi  # (3, 7)
-    s = Pphi @ phi + r  # (3,)
+    s = Pphi.dot(phi) + r  # (3,)
     k = Pphi / s[:, None]
     P = P - k[:, :, None] * k[:, None, :] * s[:, None, None]
     return theta + (k * e[:, None]).T, 0.5 * (P + P.transpose(0, 2, 1)), e
@@ -134,8 +136,25 @@ def contact_across_axis(F_S: Vec3, tau_R_S: Vec3, p_RH_S: Vec3, p_RT_S: Vec3) ->
     """The contact force across the probe's axis from the wrist's force and torque about R, in S
     (module docstring): the hand at H, the contact at T, no torque of the hand's own."""
     d = np.asarray(p_RT_S, dtype=np.float64) - p_RH_S
-    tau = np.asarray(tau_R_S, dtype=np.float64) - cross3(p_RH_S, F_S)
-    return cross3(tau, d) / float(d @ d)
+    p_RH = _floats(p_RH_S)
+    return np.array(_contact_across_axis(F_S, tau_R_S, p_RH, d.tolist(), float(d @ d)))
+
+
+def _contact_across_axis(
+    F_S: Vec3, tau_R_S: Vec3, p_RH_S: list[float], d: list[float], dd: float
+) -> tuple[float, float, float]:
+    """`contact_across_axis` with d = p_RT - p_RH and dd = d·d given, in floats:
+    τ' = τ_R - p_RH × F ;  F_contact,⊥ = (τ' × d) / dd."""
+    f0, f1, f2 = _floats(F_S)
+    h0, h1, h2 = p_RH_S
+    d0, d1, d2 = d
+    t0, t1, t2 = _floats(tau_R_S)
+    t0, t1, t2 = t0 - (h1 * f2 - h2 * f1), t1 - (h2 * f0 - h0 * f2), t2 - (h0 * f1 - h1 * f0)
+    return (t1 * d2 - t2 * d1) / dd, (t2 * d0 - t0 * d2) / dd, (t0 * d1 - t1 * d0) / dd
+
+
+def _floats(v: Vec3 | Sequence[float]) -> list[float]:
+    return np.asarray(v, dtype=np.float64).tolist()
 
 
 @dataclass(frozen=True)
@@ -229,6 +248,7 @@ class OnlineProbeMap:
         )
         self._q = p.tracking_per_sqrt_s**2
         self._r = p.reference_sigma_N**2
+        self._eye = np.eye(FEATURES)
         self.reset()
 
     def reset(self) -> None:
@@ -238,12 +258,12 @@ class OnlineProbeMap:
         self._t_last: float | None = None
 
     def correct(self, m: Vec3) -> Vec3:
-        return self.theta.T @ features(m)
+        return self.theta.T.dot(features(m))
 
     def update(self, t: float, m: Vec3, f_ref: Vec3) -> Vec3:
         """One reference sample at time t; returns the innovation (f_ref minus the prediction)."""
         if self._t_last is not None and self._q > 0.0:
-            self.P = self.P + np.eye(FEATURES) * (self._q * max(0.0, t - self._t_last))
+            self.P = self.P + self._eye * (self._q * max(0.0, t - self._t_last))
         self._t_last = t
         self.theta, self.P, e = map_update(self.theta, self.P, features(m), f_ref, self._r)
         self.updates += 1
@@ -286,27 +306,41 @@ class ContactConsistency:
         self._p_RT = np.asarray(params.tip_S) - p_SR_S
         self._axis = self._p_RT - self._p_RH
         self._axis_sq = float(self._axis @ self._axis)
+        self._p_RH_floats = self._p_RH.tolist()
+        self._axis_floats = self._axis.tolist()
         self.reset()
 
     def reset(self) -> None:
         self.mismatch_S = np.zeros(3)
         self._t_last: float | None = None
+        self._norm_of: Vec | None = None  # the mismatch_S that _norm is the norm of
 
     @property
     def mismatch(self) -> float:
-        return math.sqrt(float(self.mismatch_S @ self.mismatch_S))
+        """|mismatch_S| [N], computed once per `mismatch_S` (which a step replaces, never changes)."""
+        if self._norm_of is not self.mismatch_S:
+            self._norm = math.sqrt(float(self.mismatch_S.dot(self.mismatch_S)))
+            self._norm_of = self.mismatch_S
+        return self._norm
 
     @property
     def drifted(self) -> bool:
         return self.mismatch > self.params.mismatch_threshold_N
 
     def step(self, t: float, F_S: Vec3, tau_R_S: Vec3, F_probe_S: Vec3) -> float:
-        """Fold in the filtered wrist wrench and probe force at time t; returns the mismatch [N]."""
-        d = self._axis
-        F_probe_across = F_probe_S - d * (float(F_probe_S @ d) / self._axis_sq)
-        difference = contact_across_axis(F_S, tau_R_S, self._p_RH, self._p_RT) - F_probe_across
+        """Fold in the filtered wrist wrench and probe force at time t; returns the mismatch [N].
+
+        F_probe,⊥ = F_probe - d (F_probe·d) / |d|² ;  e = F_contact,⊥ - F_probe,⊥ ;
+        mismatch_S ← mismatch_S + a (e - mismatch_S),  a = Δt / (T + Δt)
+        """
+        d0, d1, d2 = d = self._axis_floats
+        k = float(self._axis.dot(F_probe_S)) / self._axis_sq
+        p0, p1, p2 = _floats(F_probe_S)
+        c0, c1, c2 = _contact_across_axis(F_S, tau_R_S, self._p_RH_floats, d, self._axis_sq)
+        e0, e1, e2 = c0 - (p0 - d0 * k), c1 - (p1 - d1 * k), c2 - (p2 - d2 * k)
         dt = 0.0 if self._t_last is None else t - self._t_last
         self._t_last = t
         a = dt / (self.params.mismatch_time_constant_s + dt) if dt > 0.0 else 0.0
-        self.mismatch_S = self.mismatch_S + a * (difference - self.mismatch_S)
+        m0, m1, m2 = self.mismatch_S.tolist()
+        self.mismatch_S = np.array([m0 + a * (e0 - m0), m1 + a * (e1 - m1), m2 + a * (e2 - m2)])
         return self.mismatch
