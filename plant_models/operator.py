@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -50,6 +50,25 @@ from hoh_cosim.errors import ConfigError
 from plant_models.tasks import CONTACT_TASKS, PLANES, TASKS, TaskName
 
 __all__ = ["PLANES", "TASKS", "Operator", "OperatorParams"]
+
+_XYZ = tuple[float, float, float]
+
+# constant outputs, returned again and again: read-only
+_ZERO = frozen([0.0, 0.0, 0.0])
+_ON = frozen([1.0])
+_OFF = frozen([0.0])
+
+
+def _impedance(
+    K: float, D: float, p_ref: _XYZ, p_seen: Sequence[float], v_ref: _XYZ, v_seen: Sequence[float]
+) -> _XYZ:
+    """K (p_ref - p_seen) + D (v_ref - v_seen), axis by axis."""
+    (r0, r1, r2), (x0, x1, x2), (u0, u1, u2), (v0, v1, v2) = p_ref, p_seen, v_ref, v_seen
+    return (
+        K * (r0 - x0) + D * (u0 - v0),
+        K * (r1 - x1) + D * (u1 - v1),
+        K * (r2 - x2) + D * (u2 - v2),
+    )
 
 
 @dataclass(frozen=True)
@@ -192,78 +211,122 @@ class Operator:
         self.params = params
 
     def reset(self) -> None:
-        self._history: deque[tuple[Vec, Vec, Vec]] = deque()
-        self._delay_ticks: int | None = None
-        self._origin: Vec | None = None
+        self._history: deque[tuple[list[float], list[float], list[float]]] | None = None
+        self._origin: Vec | None = None  # read-only: returned as p_ref by push_release
+        self._origin_xyz: list[float] = []
         self._integral = 0.0
         self._touched = False
         self._push_rng = np.random.default_rng(self._push_seed)
         self._pushes: list[tuple[float, Vec3]] = []  # (peak [N], unit direction), drawn in order
+        self._derived_from: OperatorParams | None = None
 
-    def _perceived(self, dt: float, now: tuple[Vec, Vec, Vec]) -> tuple[Vec, Vec, Vec]:
+    def _derive(self) -> None:
+        """What `step` uses of the parameters, vectors as Python floats (again when they change)."""
+        p = self.params
+        i, j = PLANES[p.plane]
+        self._u1 = tuple(float(k == i) for k in range(3))  # the circle's plane
+        self._u2 = tuple(float(k == j) for k in range(3))
+        self._omega = 2.0 * math.pi / p.period_s
+        self._line_xyz = p.direction_B.tolist()
+        self._d_xyz = p.press_direction_B.tolist()
+        self._d_is_axis = sum(x != 0.0 for x in self._d_xyz) == 1  # see `_dot_d`
+        self._derived_from = p
+
+    def _perceived(
+        self, dt: float, now: tuple[list[float], list[float], list[float]]
+    ) -> tuple[list[float], list[float], list[float]]:
         """The tip position, velocity and contact force as they were a reaction delay ago."""
-        if self._delay_ticks is None:
-            self._delay_ticks = round(self.params.reaction_delay_s / dt)
-        self._history.append(now)
-        if len(self._history) > self._delay_ticks + 1:
-            self._history.popleft()
-        return self._history[0]
+        history = self._history
+        if history is None:  # now and the τ/dt steps before it, dt the first step's
+            history = self._history = deque(maxlen=round(self.params.reaction_delay_s / dt) + 1)
+        history.append(now)
+        return history[0]
 
-    def reference(self, tau: float) -> tuple[Vec, Vec]:
-        """(p_ref, v_ref) `tau` seconds after the task started, relative to its origin."""
+    def _reference_xyz(self, tau: float) -> tuple[_XYZ, _XYZ]:
+        """`reference` as float triples."""
         p = self.params
         if p.task == "circle":
-            u1, u2 = np.zeros(3), np.zeros(3)
-            i, j = PLANES[p.plane]
-            u1[i], u2[j] = 1.0, 1.0
-            omega = 2.0 * math.pi / p.period_s
+            omega = self._omega
             if tau < p.ramp_s:  # angular speed ramps up linearly: no jerk at the start
                 phi, phi_dot = 0.5 * omega * tau * tau / p.ramp_s, omega * tau / p.ramp_s
             else:
                 phi, phi_dot = omega * (tau - 0.5 * p.ramp_s), omega
             c, s = math.cos(phi), math.sin(phi)
+            # p = r ((c - 1) u1 + s u2),  v = r φ̇ (-s u1 + c u2)
+            r, r_dot, c1, s_ = p.radius_m, p.radius_m * phi_dot, c - 1.0, -s
+            (a0, a1, a2), (b0, b1, b2) = self._u1, self._u2
             return (
-                p.radius_m * ((c - 1.0) * u1 + s * u2),
-                p.radius_m * phi_dot * (-s * u1 + c * u2),
+                (r * (c1 * a0 + s * b0), r * (c1 * a1 + s * b1), r * (c1 * a2 + s * b2)),
+                (
+                    r_dot * (s_ * a0 + c * b0),
+                    r_dot * (s_ * a1 + c * b1),
+                    r_dot * (s_ * a2 + c * b2),
+                ),
             )
         if p.task in ("line", "scan"):  # back and forth, starting and turning at rest
-            omega = 2.0 * math.pi / p.period_s
+            omega = self._omega
             s = 0.5 * p.length_m * (1.0 - math.cos(omega * tau))
             s_dot = 0.5 * p.length_m * omega * math.sin(omega * tau)
-            return s * p.direction_B, s_dot * p.direction_B
-        return np.zeros(3), np.zeros(3)
+            e0, e1, e2 = self._line_xyz
+            return (s * e0, s * e1, s * e2), (s_dot * e0, s_dot * e1, s_dot * e2)
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+
+    def reference(self, tau: float) -> tuple[Vec, Vec]:
+        """(p_ref, v_ref) `tau` seconds after the task started, relative to its origin."""
+        if self.params is not self._derived_from:
+            self._derive()
+        offset, v_ref = self._reference_xyz(tau)
+        return np.array(offset), np.array(v_ref)
 
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         p = self.params
+        if p is not self._derived_from:
+            self._derive()
         p_now = inputs["p_BT_B"]
         p_seen, v_seen, F_contact_seen = self._perceived(
-            dt, (p_now.copy(), inputs["twist_B"][:3].copy(), inputs["F_contact_B"].copy())
+            dt, (p_now.tolist(), inputs["twist_B"][:3].tolist(), inputs["F_contact_B"].tolist())
         )
         t_end = t + dt
         if p.task == "probe_push" and t_end >= p.start_s:
-            return self._out(np.zeros(3), p_now, on=False, tip=self.tip_push(t_end - p.start_s))
+            return self._out(_ZERO, p_now.copy(), on=False, tip=self.tip_push(t_end - p.start_s))
         if p.probe_check_s > 0.0 and p.start_s - p.probe_check_s <= t_end < p.start_s:
             tip = self.tip_push(t_end - (p.start_s - p.probe_check_s))
-            return self._out(np.zeros(3), p_now, on=False, tip=tip)
+            return self._out(_ZERO, p_now.copy(), on=False, tip=tip)
         if p.task in ("off", "probe_push") or p.released or t_end < p.start_s:
-            return self._out(np.zeros(3), p_now, on=False)
+            return self._out(_ZERO, p_now.copy(), on=False)
         if self._origin is None:
-            self._origin = p_now.copy()
+            self._origin = frozen(p_now)
+            self._origin_xyz = self._origin.tolist()
         tau = t_end - p.start_s
 
         if p.task == "push_release":
             if t_end < p.release_s:
-                return self._out(self._saturate(p.push_force_B.copy()), self._origin, on=True)
-            return self._out(np.zeros(3), self._origin, on=False)
+                return self._out(self._saturate(p.push_force_B.tolist()), self._origin, on=True)
+            return self._out(_ZERO, self._origin, on=False)
 
-        offset, v_ref = self.reference(tau)
-        p_ref = self._origin + offset
-        F = p.stiffness * (p_ref - p_seen) + p.damping * (v_ref - v_seen)
+        offset, v_ref = self._reference_xyz(tau)
+        (o0, o1, o2), (x0, x1, x2) = self._origin_xyz, offset
+        p_ref = (o0 + x0, o1 + x1, o2 + x2)
+        F = _impedance(p.stiffness, p.damping, p_ref, p_seen, v_ref, v_seen)
         if p.task in CONTACT_TASKS:
-            d = p.press_direction_B
-            F = F - float(F @ d) * d  # the impedance acts across the pressing direction only
-            F = F + self._press(float(-F_contact_seen @ d), dt) * d
-        return self._out(self._saturate(F), p_ref, on=True)
+            d0, d1, d2 = self._d_xyz
+            # F - (F·d) d: the impedance acts across the pressing direction only
+            a = self._dot_d(F)
+            F = (F[0] - a * d0, F[1] - a * d1, F[2] - a * d2)
+            # + press(-F_contact·d) d: the press along it, on the contact force felt
+            c0, c1, c2 = F_contact_seen
+            a = self._press(self._dot_d((-c0, -c1, -c2)), dt)
+            F = (F[0] + a * d0, F[1] + a * d1, F[2] + a * d2)
+        return self._out(self._saturate(F), np.array(p_ref), on=True)
+
+    def _dot_d(self, v: Sequence[float]) -> float:
+        """v · d (d the pressing direction), the value numpy's `v @ d` gives. With d along an axis
+        every product is exact and at most one is not zero: the sum has that value in any order,
+        fused or not, so Python's is numpy's; otherwise numpy computes it."""
+        if self._d_is_axis:
+            d0, d1, d2 = self._d_xyz
+            return 0.0 + v[0] * d0 + v[1] * d1 + v[2] * d2
+        return float(np.array(v) @ self.params.press_direction_B)
 
     def _press(self, contact_N: float, dt: float) -> float:
         """Force along the pressing direction: a gentle approach until contact is felt, then a PI
@@ -301,17 +364,25 @@ class Operator:
         peak, direction = self._pushes[int(k)]
         return peak * 0.5 * (1.0 - math.cos(2.0 * math.pi * phase)) * direction
 
-    def _saturate(self, F: Vec3) -> Vec3:
-        n = math.sqrt(float(F @ F))
+    def _saturate(self, F: Sequence[float]) -> Vec3:
+        """F limited to `max_force_N` in norm, as an array."""
         limit = self.params.max_force_N
-        return F * (limit / n) if n > limit else F
+        f0, f1, f2 = F
+        # |F| here and numpy's sqrt(F @ F) differ by a few ulps at most: well below the limit F is
+        # kept either way; near or above it, the norm is numpy's
+        if math.sqrt(f0 * f0 + f1 * f1 + f2 * f2) < limit * (1.0 - 1e-9):
+            return np.array(F)
+        F_arr = np.array(F)
+        n = math.sqrt(float(F_arr @ F_arr))
+        return F_arr * (limit / n) if n > limit else F_arr
 
     @staticmethod
     def _out(F: Vec3, p_ref: Vec3, on: bool, tip: Vec3 | None = None) -> dict[str, Vec]:
+        """The outputs; `F`, `p_ref` and `tip` are arrays no one changes (fresh or read-only)."""
         return {
             "F_hand_B": F,
-            "tau_hand_B": np.zeros(3),
-            "p_ref_B": np.array(p_ref, dtype=float),
-            "hand_on": np.array([1.0 if on else 0.0]),
-            "F_tip_B": np.zeros(3) if tip is None else tip,
+            "tau_hand_B": _ZERO,
+            "p_ref_B": p_ref,
+            "hand_on": _ON if on else _OFF,
+            "F_tip_B": _ZERO if tip is None else tip,
         }

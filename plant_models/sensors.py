@@ -29,6 +29,7 @@ FSE103 (seed 3.B.2, Fig. 6, 4.A, 5.A):
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -64,7 +65,14 @@ __all__ = [
 
 
 class PacketClock:
-    """Packet k sampled at phase + (k + 1)/rate, delivered `latency_s` later."""
+    """Packet k sampled at phase + (k + 1)/rate, delivered `latency_s` later.
+
+    A packet is due at t_end when its time is <= t_end + eps (eps = 1e-9/rate absorbs the rounding
+    of the master's times). `next_sample_s` is the time of the next packet to sample (while
+    `measure()` runs, of the packet it measures); `next_due_s` the earliest time at which a packet is
+    sampled or delivered: a step ending at t_end with t_end + eps < next_due_s has nothing to do.
+    The rate, latency and phase are read at construction and at `reset()`.
+    """
 
     def __init__(self, rate_hz: float, latency_s: float, phase_s: float = 0.0) -> None:
         self.rate_hz = rate_hz
@@ -77,6 +85,8 @@ class PacketClock:
         self.delivered = 0  # packets delivered so far: the counter
         self._in_flight: deque[tuple[float, Vec]] = deque()
         self.latest: Vec | None = None
+        self.eps = 1e-9 / self.rate_hz
+        self.next_sample_s = self.next_due_s = self.sample_time(0)
 
     def sample_time(self, k: int) -> float:
         return self.phase_s + (k + 1) / self.rate_hz
@@ -84,15 +94,19 @@ class PacketClock:
     def advance(self, t_end: float, measure: Callable[[], Vec], lost: bool = False) -> None:
         """Sample every packet due by `t_end` with `measure()` (or lose it: a dropout), deliver
         every packet due by then."""
-        eps = 1e-9 / self.rate_hz
-        while self.sample_time(self.sampled) <= t_end + eps:
+        t_due = t_end + self.eps
+        in_flight = self._in_flight
+        while self.next_sample_s <= t_due:
             if not lost:
-                deliver_at = self.sample_time(self.sampled) + self.latency_s
-                self._in_flight.append((deliver_at, measure()))
+                in_flight.append((self.next_sample_s + self.latency_s, measure()))
             self.sampled += 1
-        while self._in_flight and self._in_flight[0][0] <= t_end + eps:
-            self.latest = self._in_flight.popleft()[1]
+            self.next_sample_s = self.sample_time(self.sampled)
+        while in_flight and in_flight[0][0] <= t_due:
+            self.latest = in_flight.popleft()[1]
             self.delivered += 1
+        self.next_due_s = (
+            min(self.next_sample_s, in_flight[0][0]) if in_flight else self.next_sample_s
+        )
 
 
 def _rate_and_latency(params: object) -> None:
@@ -120,16 +134,22 @@ class _PacketSensor:
     def _measure(self, true: Vec) -> Vec:
         raise NotImplementedError
 
+    def _hold_initial(self) -> None:
+        """The outputs before the first packet: zeros, counter 0."""
+        self._held = {self.value_port: np.zeros(self.size), "counter": np.array([0.0])}
+
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
-        true = inputs[self.true_port]
         clock = self.clock
+        if t + dt + clock.eps < clock.next_due_s:  # no packet sampled or delivered in this step
+            return self._held
+        true = inputs[self.true_port]
         delivered = clock.delivered
         clock.advance(t + dt, lambda: self._measure(true), lost=not self.params.connected)
-        if delivered != clock.delivered or not hasattr(self, "_held"):
-            latest = clock.latest
-            # new arrays only when a packet arrives: between packets the held ones are returned
+        if delivered != clock.delivered:
+            # new arrays only when a packet arrives: between packets the held ones are returned.
+            # A packet's array is made by `_measure` for it alone and never changed: no copy.
             self._held = {
-                self.value_port: np.zeros(self.size) if latest is None else latest.copy(),
+                self.value_port: clock.latest,
                 "counter": np.array([float(clock.delivered)]),
             }
         return self._held
@@ -196,7 +216,7 @@ class FT150Sensor(_PacketSensor):
 
     def reset(self) -> None:
         self.clock.reset()
-        self.__dict__.pop("_held", None)
+        self._hold_initial()
         self.drift = np.zeros(6)
         self._last_sample_time = 0.0
 
@@ -204,21 +224,28 @@ class FT150Sensor(_PacketSensor):
         self.params = params
         self._drifts = bool(np.any(params.drift_per_sqrt_s > 0.0))
         self._quantum = params.quantisation if np.all(params.quantisation > 0.0) else None
+        # a drifting packet's 12 draws: the drift's 6 then the noise's 6, and their scales
+        self._draw_scale = np.concatenate([params.drift_per_sqrt_s, params.noise_sigma])
 
     def _measure(self, true: Vec) -> Vec:
+        """drift += z_d ⊙ rate √Δt ;  packet = q ⊙ rint((true + offset + drift + z_n ⊙ σ) / q),
+        z_d and z_n standard normal, Δt the time since the last packet, q the quantisation."""
         p = self.params
         if p.ideal:
             return true.copy()
-        t_sample = self.clock.sample_time(self.clock.sampled)
+        t_sample = self.clock.next_sample_s
         if self._drifts:
+            # one draw of 12 gives the same numbers as the drift's 6 then the noise's 6
+            scaled = self.rng.standard_normal(12) * self._draw_scale
             elapsed = t_sample - self._last_sample_time
-            self.drift = self.drift + self.rng.normal(0.0, 1.0, 6) * p.drift_per_sqrt_s * np.sqrt(
-                elapsed
-            )
+            self.drift = self.drift + scaled[:6] * math.sqrt(elapsed)
+            noise = scaled[6:]
+        else:
+            noise = self.rng.standard_normal(6) * p.noise_sigma
         self._last_sample_time = t_sample
-        value = true + p.offset + self.drift + self.rng.normal(0.0, 1.0, 6) * p.noise_sigma
+        value = true + p.offset + self.drift + noise
         if self._quantum is not None:  # every axis quantised: the common case, two operations
-            return np.round(value / self._quantum) * self._quantum
+            return np.rint(value / self._quantum) * self._quantum
         return _quantise(value, p.quantisation)
 
 
@@ -262,6 +289,17 @@ class HousingCharacterisation:
     C: Vec  # 3x3
     kappa: Vec  # 3 [1/N]
     play: Vec  # 3 [N]
+
+
+def _play(state: Vec, f: Vec, width: Vec) -> Vec:
+    """The play's new state, min(max(state, f - w), f + w) axis by axis, compared as np.clip
+    compares: x > f - w keeps x, then x < f + w keeps it, and a NaN is kept."""
+    out = []
+    for x, f_i, w in zip(state.tolist(), f.tolist(), width.tolist(), strict=True):
+        low, high = f_i - w, f_i + w
+        x = x if x != x or x > low else low
+        out.append(x if x != x or x < high else high)
+    return np.array(out)
 
 
 def housing_characterisation(params: HousingParams) -> HousingCharacterisation:
@@ -326,7 +364,7 @@ class FSE103Sensor(_PacketSensor):
 
     def reset(self) -> None:
         self.clock.reset()
-        self.__dict__.pop("_held", None)
+        self._hold_initial()
         self.play_state = np.zeros(3)
 
     def housing_output(self, f: Vec) -> Vec:
@@ -334,7 +372,7 @@ class FSE103Sensor(_PacketSensor):
         p, h = self.params, self.housing
         y = f
         if p.hysteresis:
-            self.play_state = np.clip(self.play_state, f - h.play, f + h.play)
+            self.play_state = _play(self.play_state, f, h.play)
             y = self.play_state
         if p.redirection:
             y = h.C @ y + h.kappa * y * np.abs(y)
@@ -344,4 +382,4 @@ class FSE103Sensor(_PacketSensor):
         p = self.params
         if p.ideal:
             return true.copy()
-        return self.housing_output(true) + p.offset + self.rng.normal(0.0, 1.0, 3) * p.noise_sigma
+        return self.housing_output(true) + p.offset + self.rng.standard_normal(3) * p.noise_sigma
