@@ -154,9 +154,9 @@ def horizontal_fixture(
     fixture is a horizontal plane (up = +z of the base); `up_B` is a unit vector.
     Returns the velocity and whether the fixture is engaged.
     """
-    if float(F_probe_B @ F_probe_B) <= threshold_N * threshold_N:
+    if float(F_probe_B.dot(F_probe_B)) <= threshold_N * threshold_N:
         return v_B, False
-    upward = float(v_B @ up_B)
+    upward = float(v_B.dot(up_B))
     if upward > 0.0:
         return v_B - upward * up_B, True
     return v_B, True

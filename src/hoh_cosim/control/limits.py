@@ -23,7 +23,7 @@ __all__ = [
 
 
 def _norm(v: Vec) -> float:
-    return math.sqrt(float(v @ v))
+    return math.sqrt(v.dot(v))
 
 
 def clamp_speed(v: Vec3, max_speed: float) -> tuple[Vec3, bool]:
@@ -76,7 +76,7 @@ def probe_force_limit(v_B: Vec3, F_probe_B: Vec3, soft_cap: float) -> tuple[Vec3
     if n < soft_cap:
         return v_B, False
     out_of_patient = F_probe_B / n
-    into = float(v_B @ out_of_patient)
+    into = float(v_B.dot(out_of_patient))
     if into < 0.0:
         return v_B - into * out_of_patient, True
     return v_B, True
