@@ -79,6 +79,7 @@ class InProcessRuntime:
     def bind(self, outputs: np.ndarray) -> None:
         self.out = outputs
         self._out_views = [(name, outputs[sl]) for name, sl in self._outputs]
+        self._written: list[object] = [None] * len(self._out_views)
 
     def initialize(self) -> None:
         initial = getattr(self.block, "initial_outputs", None)
@@ -86,8 +87,14 @@ class InProcessRuntime:
             self._write(initial())
 
     def _write(self, outputs: dict[str, np.ndarray]) -> None:
-        for name, view in self._out_views:
-            view[...] = outputs[name]
+        # An array returned again holds the values it held (the block contract): the view it was
+        # copied into still has them, so only new arrays are copied.
+        written = self._written
+        for i, (name, view) in enumerate(self._out_views):
+            value = outputs[name]
+            if value is not written[i]:
+                view[...] = value
+                written[i] = value
 
     def step(self, t: float, dt: float) -> None:
         self._write(self.block.step(t, dt, self._inputs))

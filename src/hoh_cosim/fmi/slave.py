@@ -201,6 +201,7 @@ class BlockSlave(_PythonFmuSlave):
             offset += port.size
         # views into the reals, refilled by set_real in place (see the block contract)
         self._input_views = {name: self._reals[sl] for name, sl in self._inputs}
+        self._written: list[object] = [None] * len(self._outputs)  # see _write_outputs
         self._input_vrs = list(range(self._n_in))
         self._output_vrs = list(range(self._n_in, self._n_io))
         self._instance: Any = None
@@ -242,6 +243,8 @@ class BlockSlave(_PythonFmuSlave):
         except Exception as exc:
             self._fail("fmi2SetReal", exc)
             return
+        if any(self._n_in <= vr < self._n_io for vr in vrs):  # an output overwritten
+            self._written = [None] * len(self._outputs)
         if max(vrs) >= self._n_io:
             self._changed.update(vr for vr in vrs if vr >= self._n_io)
 
@@ -289,8 +292,14 @@ class BlockSlave(_PythonFmuSlave):
             self._fail("initialisation", exc)
 
     def _write_outputs(self, outputs: dict[str, np.ndarray]) -> None:
-        for name, sl in self._outputs:
-            self._reals[sl] = outputs[name]
+        # An array returned again holds the values it held (the block contract), which are in
+        # the reals already unless something else wrote there since: only new arrays are copied.
+        written = self._written
+        for i, (name, sl) in enumerate(self._outputs):
+            value = outputs[name]
+            if value is not written[i]:
+                self._reals[sl] = value
+                written[i] = value
 
     def enter_initialization_mode(self) -> None:
         self._build()
@@ -386,6 +395,7 @@ def _restore(slave: BlockSlave, state: bytes) -> None:
     if reals.shape != slave._reals.shape:
         raise ValueError(f"a state of {reals.size} reals for an FMU of {slave._reals.size}")
     slave._reals[:] = reals  # in place: the input views stay valid
+    slave._written = [None] * len(slave._outputs)
     slave._others = others
     slave._instance, slave._changed, slave._failure, slave._step = instance, changed, failure, step
 
