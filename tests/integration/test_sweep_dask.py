@@ -85,13 +85,15 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             client.wait_for_workers(2, timeout=60)
         yield address
     finally:
+        # the workers first and one by one, while the scheduler still answers their goodbye (a
+        # worker whose scheduler is gone retries it past any wait); every process reaped
         for p in reversed(procs):
             p.terminate()
-        for p in procs:
             try:
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+                p.wait()
 
 
 SWEEP = """\
