@@ -55,6 +55,7 @@ import numpy as np
 
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.hardware.session_log import ORPHANED_CAUSE
+from hoh_cosim.rehearsal.faults import FAULTS
 from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 
 __all__ = [
@@ -149,19 +150,9 @@ KINDS = {
         Kind("cpu_hog", (0.5, 2.5), _never),
     )
 }
-WORLD_KINDS = frozenset(
-    {
-        "ft_stall",
-        "ft_garbage",
-        "ft_nan",
-        "ft_spike",
-        "ft_disconnect",
-        "probe_unplug",
-        "probe_garbage",
-        "probe_framing",
-        "force_spike",
-    }
-)
+# what the rehearsal world injects; the protective stop, a world fault too, comes from the UR
+# controller here, beside the emergency stop
+WORLD_KINDS = frozenset(FAULTS) - {"protective_stop"}
 
 
 @dataclass(frozen=True)
