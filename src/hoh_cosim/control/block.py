@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import enum
 import inspect
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
@@ -36,6 +36,7 @@ __all__ = [
     "Block",
     "Port",
     "check_inputs",
+    "copy_new_outputs",
     "make_block",
     "port_element_names",
     "takes_rng",
@@ -114,6 +115,22 @@ def check_inputs(block: Block, inputs: Mapping[str, object]) -> dict[str, Vec]:
             )
         out[name] = value
     return out
+
+
+def copy_new_outputs(
+    outputs: Mapping[str, Vec], views: Sequence[tuple[str, Vec]], written: list[object]
+) -> None:
+    """Copy each output port's array into its view, unless it is the array copied there last.
+
+    An array a block returns again holds the values it held (the contract above), so the view
+    still has them. `written` holds, per view, the array last copied into it; an adapter sets the
+    entries to None when anything else writes into the views.
+    """
+    for i, (name, view) in enumerate(views):
+        value = outputs[name]
+        if value is not written[i]:
+            view[...] = value
+            written[i] = value
 
 
 def zero_inputs(block: Block) -> dict[str, Vec]:

@@ -42,7 +42,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from hoh_cosim.control.block import make_block
+from hoh_cosim.control.block import copy_new_outputs, make_block
 from hoh_cosim.cosim import COUPLINGS, ENGINES, EXTERNAL_ENGINES
 from hoh_cosim.cosim.external import simulate_external
 from hoh_cosim.cosim.recording import Recording, recording_layout
@@ -87,14 +87,7 @@ class InProcessRuntime:
             self._write(initial())
 
     def _write(self, outputs: dict[str, np.ndarray]) -> None:
-        # An array returned again holds the values it held (the block contract): the view it was
-        # copied into still has them, so only new arrays are copied.
-        written = self._written
-        for i, (name, view) in enumerate(self._out_views):
-            value = outputs[name]
-            if value is not written[i]:
-                view[...] = value
-                written[i] = value
+        copy_new_outputs(outputs, self._out_views, self._written)
 
     def step(self, t: float, dt: float) -> None:
         self._write(self.block.step(t, dt, self._inputs))

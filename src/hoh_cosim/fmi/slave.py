@@ -47,7 +47,13 @@ from pythonfmu import Fmi2Slave as _PythonFmuSlave
 from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from hoh_cosim.control.block import make_block, port_element_names, takes_rng, variable_step
+from hoh_cosim.control.block import (
+    copy_new_outputs,
+    make_block,
+    port_element_names,
+    takes_rng,
+    variable_step,
+)
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import leaves, with_values
 
@@ -201,7 +207,10 @@ class BlockSlave(_PythonFmuSlave):
             offset += port.size
         # views into the reals, refilled by set_real in place (see the block contract)
         self._input_views = {name: self._reals[sl] for name, sl in self._inputs}
-        self._written: list[object] = [None] * len(self._outputs)  # see _write_outputs
+        # and into the reals the outputs are copied to, with the arrays copied last (new arrays
+        # only: see copy_new_outputs; reset whenever anything else writes there)
+        self._output_views = [(name, self._reals[sl]) for name, sl in self._outputs]
+        self._written: list[object] = [None] * len(self._outputs)
         self._input_vrs = list(range(self._n_in))
         self._output_vrs = list(range(self._n_in, self._n_io))
         self._instance: Any = None
@@ -292,14 +301,7 @@ class BlockSlave(_PythonFmuSlave):
             self._fail("initialisation", exc)
 
     def _write_outputs(self, outputs: dict[str, np.ndarray]) -> None:
-        # An array returned again holds the values it held (the block contract), which are in
-        # the reals already unless something else wrote there since: only new arrays are copied.
-        written = self._written
-        for i, (name, sl) in enumerate(self._outputs):
-            value = outputs[name]
-            if value is not written[i]:
-                self._reals[sl] = value
-                written[i] = value
+        copy_new_outputs(outputs, self._output_views, self._written)
 
     def enter_initialization_mode(self) -> None:
         self._build()
