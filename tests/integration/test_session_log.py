@@ -334,6 +334,70 @@ def test_every_message_is_valid_against_its_channels_schema(written):
     assert problems == []
 
 
+def _mutated(message: dict[str, Any], rng: np.random.Generator) -> Any:
+    """A message with one thing changed at random: a value's type or integrality, a key dropped or
+    added, a list longer or shorter, or the message not an object at all."""
+    stand_ins = [0, 7, 1.0, 0.5, -2.25, 1e300, "0.5", "", True, False, None, [], {}, [1.0] * 3]
+    changed = json.loads(json.dumps(message))
+    key = list(changed)[rng.integers(len(changed))]
+    what = rng.integers(7)
+    if what == 0:
+        changed[key] = stand_ins[rng.integers(len(stand_ins))]
+    elif what == 1:
+        del changed[key]
+    elif what == 2:
+        changed["extra"] = stand_ins[rng.integers(len(stand_ins))]
+    elif what == 3 and isinstance(changed[key], list) and changed[key]:
+        changed[key][rng.integers(len(changed[key]))] = stand_ins[rng.integers(len(stand_ins))]
+    elif what == 4 and isinstance(changed[key], list):
+        changed[key] = changed[key][: rng.integers(len(changed[key]) + 1)] + [0.5] * rng.integers(2)
+    elif what == 5:
+        changed[NONFINITE] = {key: ["nan"] * rng.integers(4) if rng.integers(2) else "inf"}
+    else:
+        return [changed] if rng.integers(2) else 3
+    return changed
+
+
+def test_messages_judged_by_their_shape_get_the_reference_validators_verdicts(written, tmp_path):
+    """invalid_messages judges a shape once: on valid messages and on a thousand broken ones it
+    reports exactly what jsonschema says of each message on its own."""
+    from jsonschema import Draft202012Validator
+    from mcap.writer import Writer
+
+    from hoh_cosim.hardware import log_check
+
+    # every channel's schema is judged by shape (or this test would prove nothing)
+    assert all(log_check._structural(channel_schema(topic)) for topic in CHANNELS)
+    rng = np.random.default_rng(5)
+    originals = _raw_messages(written)
+    messages = originals + [
+        (topic, _mutated(m, rng))
+        for topic, m in (originals[i] for i in rng.integers(len(originals), size=1000))
+    ]
+    path = tmp_path / "mutated.mcap"
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        channels = {}
+        for topic in CHANNELS:
+            schema = writer.register_schema(
+                name=topic, encoding="jsonschema", data=json.dumps(channel_schema(topic)).encode()
+            )
+            channels[topic] = writer.register_channel(topic, "json", schema)
+        for i, (topic, message) in enumerate(messages):
+            writer.add_message(channels[topic], i, json.dumps(message).encode(), i)
+        writer.finish()
+    expected = []
+    for topic, message in messages:
+        validator = Draft202012Validator(channel_schema(topic))
+        k = message.get("k") if isinstance(message, dict) else None
+        expected += [f"{topic} k={k}: {error.message}" for error in validator.iter_errors(message)]
+    count, problems = invalid_messages(path)
+    assert count == len(messages)
+    assert len(problems) > 500  # most mutations break the schema; some (a number for a number) not
+    assert problems == expected
+
+
 def test_the_schemas_refuse_what_they_should():
     from jsonschema import Draft202012Validator
 
