@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import multiprocessing as mp
 import queue
 import re
 import select
@@ -53,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim.rehearsal import rtde_protocol as rtde
-from hoh_cosim.rehearsal.world import as_hardware
+from hoh_cosim.rehearsal.world import as_hardware, process_context
 
 __all__ = ["INJECTIONS", "UrController"]
 
@@ -152,7 +151,7 @@ class UrController:
         self.host = host
         self.rate_hz = VERSIONS[series][2]
         self.events: list[tuple[float, str]] = []
-        context = mp.get_context("spawn")
+        context = process_context()
         self._control = context.Queue()
         self._events = context.Queue()
         self._process = context.Process(
