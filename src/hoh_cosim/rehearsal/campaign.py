@@ -543,13 +543,19 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
     if stopping:
         first_stop = min(at + KINDS[f.kind].detect_s for f, at in stopping)
         # a fault seen up to 0.15 s before or after the first that must stop may be named
-        named = [f for f, at in candidates if at + KINDS[f.kind].detect_s <= first_stop + 0.15]
-        run.first_kind = named[0].kind
+        named = [
+            (f, at) for f, at in candidates if at + KINDS[f.kind].detect_s <= first_stop + 0.15
+        ]
+        # the fault the cause names is the one that stopped the session, and its time and bound
+        # are the ones that count: a fault that may stop or not, named first but survived, does
+        # not make a later stop late
+        said = [(f, at) for f, at in named if re.search(KINDS[f.kind].cause, run.cause)]
+        fault, fault_at = said[0] if said else named[0]
+        run.first_kind = fault.kind
         if not run.stopped:
             v.append(f"no stop after {run.first_kind}: {run.cause or 'no cause said'}")
-        elif not any(re.search(KINDS[f.kind].cause, run.cause) for f in named):
-            v.append(f"the cause does not name {'/'.join(f.kind for f in named)}: {run.cause!r}")
-        fault_at = min(at for f, at in run.injected if f in named)
+        elif not said:
+            v.append(f"the cause does not name {'/'.join(f.kind for f, _ in named)}: {run.cause!r}")
         kind = KINDS[run.first_kind]
         run.bound_s = kind.detect_s + 1.0 / WATCHDOG_HZ + BRAKE_S
         run.standstill_s = monitor.standstill_after(fault_at) - fault_at
