@@ -549,12 +549,12 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
         # the fault the cause names is the one that stopped the session, and its time and bound
         # are the ones that count: a fault that may stop or not, named first but survived, does
         # not make a later stop late
-        said = [(f, at) for f, at in named if re.search(KINDS[f.kind].cause, run.cause)]
-        fault, fault_at = said[0] if said else named[0]
+        causes = [(f, at) for f, at in named if re.search(KINDS[f.kind].cause, run.cause)]
+        fault, fault_at = causes[0] if causes else named[0]
         run.first_kind = fault.kind
         if not run.stopped:
             v.append(f"no stop after {run.first_kind}: {run.cause or 'no cause said'}")
-        elif not said:
+        elif not causes:
             v.append(f"the cause does not name {'/'.join(f.kind for f, _ in named)}: {run.cause!r}")
         kind = KINDS[run.first_kind]
         run.bound_s = kind.detect_s + 1.0 / WATCHDOG_HZ + BRAKE_S
