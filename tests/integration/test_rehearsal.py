@@ -8,9 +8,13 @@ must end in a stopped robot, a message that names the cause and a complete log.
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +23,7 @@ import pytest
 
 from hoh_cosim.cli import main
 from hoh_cosim.control.sequencer import SequencerParams
+from hoh_cosim.control.supervisor import STARVED_TEXT
 from hoh_cosim.hardware.calibrate import calibrate
 from hoh_cosim.hardware.diagnostics import read_streams
 from hoh_cosim.hardware.fse103 import FSE103Port
@@ -81,8 +86,10 @@ def run_session(
     *faults: Fault,
     task: str = "circle",
     until_world_s: float | None = None,
+    beside: Callable[[Robot], None] | None = None,
 ) -> Outcome:
-    """A session of `seconds`, or (`until_world_s`) until the world's clock reaches that."""
+    """A session of `seconds`, or (`until_world_s`) until the world's clock reaches that, with
+    `beside` (given the robot) running in a thread of its own meanwhile."""
     # the runner shares two cores with the emulators and the rest of the suite, and this VM has been
     # seen to stall a process for 40 ms: a 200 ms watchdog, so that only a real hang trips it
     # the hand comes once the runner's rebias is done (a busy machine delays it by seconds)
@@ -105,6 +112,8 @@ def run_session(
         )
         if until_world_s is not None:
             stop_at_world_time(runner, robot, until_world_s)
+        if beside is not None:
+            threading.Thread(target=beside, args=(robot,), daemon=True).start()
         result = runner.run(seconds)
         after = stopped_state(robot)
     return Outcome(result, after, read_session(log_path), ft, probe)
@@ -207,6 +216,57 @@ def test_garbage_is_counted_and_the_session_goes_on(tmp_path, fault):
     stream = outcome.ft if fault == "ft_garbage" else outcome.probe
     assert stream.mailbox.stats.bad_frames >= 1
     assert not outcome.after.program_running
+
+
+FIFO_HOG = """
+import os, sys, time
+os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(sys.argv[1])))
+print("hogging", flush=True)
+end = time.monotonic() + float(sys.argv[2])
+while time.monotonic() < end:
+    pass
+"""
+
+
+def test_a_probe_silenced_by_a_starved_machine_is_not_taken_for_a_silent_device(tmp_path):
+    # Real-time work below the loop (priority 40) busy on every core for 400 ms: the loop, its
+    # readers and the world still run, but ordinary tasks do not, among them the kernel worker
+    # that moves the pseudo-terminal's bytes to the FSE103's reader. The device is fine; its
+    # silence of 400 ms, past the 250 ms limit, used to end the session.
+    hog_s = 0.4
+    hogs: list[subprocess.Popen] = []
+
+    def hog(robot: Robot) -> None:
+        while robot.state().timestamp_s < FAULT_AT_S:
+            time.sleep(0.01)
+        hogs.extend(
+            subprocess.Popen(
+                [sys.executable, "-S", "-c", FIFO_HOG, "40", str(hog_s)],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            for _ in range(os.cpu_count() or 1)
+        )
+
+    outcome = run_session(tmp_path, 60.0, until_world_s=FAULT_AT_S + 2.0, beside=hog)
+    said = [(process.communicate(), process.returncode) for process in hogs]
+    if any(code != 0 for _, code in said):
+        pytest.skip(f"no real-time priority for the hog here: {said[0][0][1].strip()[-200:]}")
+    assert len(hogs) == (os.cpu_count() or 1)
+    assert outcome.result.clean, outcome.result.cause
+    assert outcome.result.cause == "stopped on request"
+    # the runner said what it did not count: the FSE103's silence while the machine starved
+    starved = [m["detail"] for m in outcome.log.messages["/events"] if m["event"] == "starved"]
+    found = [
+        re.fullmatch(
+            rf"FSE103 on \S+: (\d+) {re.escape(STARVED_TEXT)}, not counted as its silence", d
+        )
+        for d in starved
+    ]
+    assert found, starved
+    assert all(found), starved
+    assert 0.5 * hog_s <= 1e-3 * sum(int(f[1]) for f in found) <= 1.0 + hog_s
 
 
 def unlogged_session(

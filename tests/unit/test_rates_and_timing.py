@@ -1,14 +1,19 @@
 """What the runner measures of the streams and of itself: packet rates a burst cannot fool, cycle
-timing in fixed memory, and the machine's CPU pressure."""
+timing in fixed memory, the machine's CPU pressure, and the time ordinary tasks were starved."""
 
 from __future__ import annotations
 
 import math
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
 
-from hoh_cosim.hardware.pressure import CpuPressure
+from hoh_cosim.hardware.pressure import Canary, CpuPressure
 from hoh_cosim.hardware.runner import CycleTiming, LatencyHistogram
 from hoh_cosim.hardware.streams import RateCheck, robust_period
 
@@ -157,3 +162,51 @@ def test_without_the_kernels_file_nothing_is_measured(tmp_path):
     assert pressure.waited_s() is None
     pressure.start()
     assert pressure.overload() is None
+
+
+CANARY_PROBE = """
+import sys, time
+from hoh_cosim.hardware.pressure import Canary
+canary = Canary()
+print("ready", flush=True)
+sys.stdin.readline()  # the parent stops and continues this process meanwhile
+print(f"{canary.starved_s():.6f}", flush=True)
+"""
+
+
+def test_the_canary_counts_the_time_its_process_could_not_run():
+    # a stopped process is the starvation the canary stands for: no thread of it runs
+    with subprocess.Popen(
+        [sys.executable, "-c", CANARY_PROBE],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    ) as child:
+        try:
+            assert child.stdout.readline().strip() == "ready"
+            time.sleep(0.05)
+            os.kill(child.pid, signal.SIGSTOP)
+            time.sleep(0.4)
+            os.kill(child.pid, signal.SIGCONT)
+            time.sleep(0.05)
+            child.stdin.write("\n")
+            child.stdin.flush()
+            starved = float(child.stdout.readline())
+        finally:
+            child.kill()
+    # 400 ms stopped, less the 20 ms allowance; a busy machine may add, never take away
+    assert 0.37 <= starved <= 0.8
+
+
+def test_a_canary_that_runs_counts_nothing_and_an_overdue_tick_counts_at_once():
+    canary = Canary(tick_s=0.005, allowance_s=0.05)
+    try:
+        time.sleep(0.3)
+        assert canary.starved_s() < 0.05  # a tick 50 ms late on a busy machine at most, not 300
+        # a tick still overdue counts before it comes: the supervisor reads it mid-starvation
+        canary._done.set()
+        canary._thread.join()
+        time.sleep(0.2)
+        assert 0.14 <= canary.starved_s() <= 0.4
+    finally:
+        canary.close()

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from hoh_cosim.control.supervisor import (
+    STARVED_TEXT,
     LimitParams,
     SessionPolicy,
     Status,
@@ -225,6 +226,48 @@ def test_the_machines_load_alone_ends_nothing():
     # the load only names a silence that ends the session anyway
     verdict = verdict_of(Status.STALE_FT, HELD, estimate={"ft_age": 0.1}, overload="x")
     assert verdict.cause is None
+
+
+@pytest.mark.parametrize(
+    ("flag", "age_port", "device"),
+    [(Status.STALE_FT, "ft_age", FT), (Status.STALE_PROBE, "probe_age", PROBE)],
+)
+def test_silence_while_ordinary_tasks_were_starved_is_not_counted(flag, age_port, device):
+    # 300 ms silent, 100 ms of it starved: 200 ms counted, the command stays zero
+    verdict = verdict_of(flag, HELD, estimate={age_port: 0.3}, starved={flag: 0.1})
+    assert verdict.cause is None
+    assert verdict.status == flag
+    # 400 ms silent, 100 ms of it starved: 300 ms counted, past the 250 ms limit
+    verdict = verdict_of(flag, HELD, estimate={age_port: 0.4}, starved={flag: 0.1})
+    assert_stopped(
+        verdict,
+        f"{device}: no new sample for 400 ms (the stream stalled; 100 {STARVED_TEXT})",
+    )
+
+
+def test_a_starved_machine_defers_a_stop_only_up_to_stale_stop_max_s():
+    policy = SessionPolicy(LimitParams(), stale_stop_max_s=0.8, ft=FT, probe=PROBE)
+    starved = {Status.STALE_PROBE: 10.0}  # starved all along (and then some: clipped to the age)
+    verdict = verdict_of(
+        Status.STALE_PROBE, HELD, policy=policy, estimate={"probe_age": 0.79}, starved=starved
+    )
+    assert verdict.cause is None
+    verdict = verdict_of(
+        Status.STALE_PROBE, HELD, policy=policy, estimate={"probe_age": 0.8}, starved=starved
+    )
+    assert_stopped(
+        verdict, f"{PROBE}: no new sample for 800 ms (the stream stalled; 800 {STARVED_TEXT})"
+    )
+
+
+def test_one_streams_starved_time_does_not_defer_the_others_stop():
+    verdict = verdict_of(
+        Status.STALE_FT | Status.STALE_PROBE,
+        HELD,
+        estimate={"ft_age": 0.26, "probe_age": 0.26},
+        starved={Status.STALE_PROBE: 0.2},
+    )
+    assert_stopped(verdict, f"{FT}: no new sample for 260 ms (the stream stalled)")
 
 
 @pytest.mark.parametrize(

@@ -15,6 +15,7 @@ facts of the rig, given once as a `SensorSetup` and passed to both blocks.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -162,11 +163,13 @@ def control_cycle(
     ft_error: str | None = None,
     probe_error: str | None = None,
     overload: str | None = None,
+    starved: Mapping[Status, float] | None = None,
 ) -> Cycle:
     """Estimator, controller and supervisor on one cycle's reading (the block contract's time:
     `t` is the cycle number times `dt`). `ft_error` and `probe_error` are what the streams'
     readers last reported, `overload` how starved the CPU was while a stream was stale, for the
-    supervisor's message."""
+    supervisor's message, and `starved` how long ordinary tasks were starved since each stale
+    stream turned stale (`supervise`)."""
     estimator, controller = blocks.estimator, blocks.controller
     blocks._ft_counter[0] = reading.ft_count
     blocks._probe_counter[0] = reading.probe_count
@@ -194,6 +197,7 @@ def control_cycle(
         ft_error=ft_error,
         probe_error=probe_error,
         overload=overload,
+        starved=starved,
     )
     return Cycle(reading, estimate, command, verdict, events)
 

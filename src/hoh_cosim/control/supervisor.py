@@ -18,10 +18,15 @@ Every safety decision lives here, as pure functions over what the loop knows:
 
 A stream's age counts the loop's cycles, not the wall clock: a loop held up for 100 ms runs one
 late cycle, not fifty, so its own stall never makes a stream stale; a stall past the watchdog is
-named as the loop's. A stream silent for
-`stale_stop_s` of cycles on a machine whose CPU was overloaded meanwhile is named so: on Linux the
-bytes of a serial device pass through a kernel worker that an overloaded machine starves, so such a
-silence says little about the device.
+named as the loop's. The device's silence is counted only while ordinary tasks could run: on Linux
+the bytes of a serial port (and of a pseudo-terminal) reach the reader through a kernel worker at
+ordinary priority, which the loop's own real-time threads and a loaded machine can starve for
+longer than `stale_stop_s`, with a perfectly healthy device. The runner measures that starvation
+with a canary thread of ordinary priority (`hoh_cosim.hardware.pressure.Canary`) from the cycle a
+stream turns stale on; the session ends once the stream's age less that starved time reaches
+`stale_stop_s`, or its age alone reaches `stale_stop_max_s`, whatever the machine does. The
+command is zero all the while, so the arm stands still. A stop names the starved time it
+discounted, and the CPU pressure when the machine was overloaded.
 
 Two kinds of outcome, one `Status` flag set:
 - clamps that change the command and let it through (speed, acceleration, workspace, soft force
@@ -59,6 +64,7 @@ from hoh_cosim.errors import ConfigError
 
 __all__ = [
     "LATCHED_FLAGS",
+    "STARVED_TEXT",
     "STOP_FLAGS",
     "LimitParams",
     "SessionPolicy",
@@ -266,6 +272,7 @@ class SessionPolicy:
 
     limits: LimitParams
     stale_stop_s: float = 0.25  # a stream silent this long ends the session; shorter: zero twist
+    stale_stop_max_s: float = 1.0  # ... however long ordinary tasks were starved meanwhile
     robot: str = "the robot"  # the devices' names, as the messages give them
     ft: str = "FT-150"
     probe: str | None = None  # None: no probe sensor
@@ -282,6 +289,9 @@ class Verdict:
 
 
 _ZERO_TWIST = frozen(np.zeros(6))
+
+STARVED_TEXT = "ms of it with this machine's ordinary tasks starved"
+"""How a stale stream's stop names the starved time it discounted (after the milliseconds)."""
 
 
 def robot_cause(policy: SessionPolicy, problem: str) -> str:
@@ -316,6 +326,7 @@ def supervise(
     ft_error: str | None = None,
     probe_error: str | None = None,
     overload: str | None = None,
+    starved: Mapping[Status, float] | None = None,
 ) -> Verdict:
     """Decide one cycle of a session: send the controller's twist, send zero, or end the session.
 
@@ -323,10 +334,14 @@ def supervise(
     force), `ft` and `probe` the raw samples the cycle read (None: none yet), `checking` whether the
     probe check runs (the estimator is not ready by design then, and the robot holds still), the
     errors what the streams' readers last reported, for the message, and `overload` how starved the
-    machine's CPU was while a stream was stale (None: not measured, or not starved)."""
+    machine's CPU was while a stream was stale (None: not measured, or not starved), and
+    `starved` for each stale stream's flag how long ordinary tasks were starved since it turned
+    stale [s] (the module's docstring)."""
     if checking:
         status &= ~Status.NOT_READY
-    cause = _stop_cause(policy, status, estimate, ft, probe, ft_error, probe_error, overload)
+    cause = _stop_cause(
+        policy, status, estimate, ft, probe, ft_error, probe_error, overload, starved or {}
+    )
     if cause is None:
         cause = _command_cause(policy.limits, twist_B)
     return Verdict(status, _ZERO_TWIST if cause else twist_B, cause)
@@ -341,6 +356,7 @@ def _stop_cause(
     ft_error: str | None,
     probe_error: str | None,
     overload: str | None,
+    starved: Mapping[Status, float],
 ) -> str | None:
     for name, values in ((policy.ft, ft), (policy.probe, probe)):
         if values is not None and not np.all(np.isfinite(values)):
@@ -360,10 +376,14 @@ def _stop_cause(
     ):
         if status & flag and name is not None:
             age = float(estimate[age_port][0])
-            if age >= policy.stale_stop_s:
+            discounted = min(age, max(0.0, starved.get(flag, 0.0)))
+            if age - discounted >= policy.stale_stop_s or age >= policy.stale_stop_max_s:
                 if error is None and overload is not None:
                     error = f"{overload}: its delivery was starved, not necessarily the device"
-                return f"{name}: no new sample for {1e3 * age:.0f} ms ({error or 'the stream stalled'})"
+                why = error or "the stream stalled"
+                if discounted >= 0.0005:
+                    why += f"; {1e3 * discounted:.0f} {STARVED_TEXT}"
+                return f"{name}: no new sample for {1e3 * age:.0f} ms ({why})"
             gaps |= flag
     if not (status & STOP_FLAGS) & ~gaps:
         return None

@@ -1,4 +1,5 @@
-"""How starved the machine's CPU is: Linux's pressure stall information (`/proc/pressure/cpu`).
+"""How starved the machine's CPU is: Linux's pressure stall information (`/proc/pressure/cpu`), and
+a canary thread of ordinary priority that counts the time it could not run.
 
 The kernel adds up the time during which at least one runnable task waited for a CPU ("some",
 microseconds since boot). Over a window, that time divided by the window's length says how
@@ -6,15 +7,24 @@ overloaded the machine was: near 0 on an idle machine, near 1 when something alw
 runner reads it only while a stream is silent, to tell a silent device from a starved machine (a
 serial device's bytes reach the reader through a kernel worker thread that competes for the CPU
 like any task). Where the file is missing (another kernel, another system) nothing is measured.
+
+The pressure says that *some* task waited; `Canary` says whether an ordinary one could run at all.
+It is a thread at the default policy and priority (SCHED_OTHER, nice 0, like the kernel worker that
+delivers a serial port's bytes), ticking every `tick_s`; a tick that comes more than `allowance_s`
+late adds its lateness to the starved time. On a machine where the real-time threads (the loop,
+the readers, a simulated world) and other work leave no CPU to ordinary tasks, the canary starves
+with the worker, and the supervisor does not count that time as the device's silence
+(`hoh_cosim.control.supervisor`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import threading
 import time
 
-__all__ = ["OVERLOADED", "CpuPressure"]
+__all__ = ["OVERLOADED", "Canary", "CpuPressure"]
 
 OVERLOADED = 0.5
 """The share of a window during which tasks waited for a CPU from which the machine is called
@@ -91,3 +101,39 @@ class CpuPressure:
             with contextlib.suppress(OSError):
                 os.close(self._fd)
             self._fd = None
+
+
+class Canary:
+    """A daemon thread of ordinary priority whose late ticks measure how long ordinary tasks were
+    starved of the CPU. `starved_s()` is the total so far, a tick still overdue included."""
+
+    def __init__(self, tick_s: float = 0.005, allowance_s: float = 0.02) -> None:
+        self.tick_s, self.allowance_s = tick_s, allowance_s
+        self._last = time.monotonic()
+        self._starved = 0.0
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="hoh-canary", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        # ordinary, whatever the thread that made it runs at (a new thread inherits the policy)
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        while not self._done.wait(self.tick_s):
+            now = time.monotonic()
+            late = now - self._last - self.allowance_s
+            self._last = now  # before the sum: see starved_s
+            if late > 0.0:
+                self._starved += late
+
+    def starved_s(self) -> float:
+        """Seconds the canary could not run beyond its allowance, since it started, up to now."""
+        # the tick writes `_last` before `_starved`, this reads them the other way round: a tick
+        # in between can only leave its lateness out, never count it twice
+        starved, last = self._starved, self._last
+        return starved + max(0.0, time.monotonic() - last - self.allowance_s)
+
+    def close(self) -> None:
+        self._done.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=1.0)

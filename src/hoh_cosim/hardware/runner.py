@@ -42,6 +42,7 @@ from hoh_cosim.control.cycle import ControlBlocks, Reading, SensorSetup, control
 from hoh_cosim.control.estimator import Estimator, import_filter_libraries
 from hoh_cosim.control.gravity import GravityCalibration, GravityModel
 from hoh_cosim.control.supervisor import (
+    STARVED_TEXT,
     SessionPolicy,
     Status,
     Verdict,
@@ -51,7 +52,7 @@ from hoh_cosim.control.supervisor import (
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.config import HardwareConfig
-from hoh_cosim.hardware.pressure import CpuPressure
+from hoh_cosim.hardware.pressure import Canary, CpuPressure
 from hoh_cosim.hardware.robot import Robot, RobotState, named_problem
 from hoh_cosim.hardware.session_log import CycleRecord, SessionLog, at_log_resolution
 from hoh_cosim.hardware.streams import Mailbox, RateCheck, ReaderThread, Sample, robust_period
@@ -341,6 +342,7 @@ class Runner:
         return SessionPolicy(
             limits=self.config.controller.limits,
             stale_stop_s=self.config.stale_stop_s,
+            stale_stop_max_s=STARVED_STALE_FACTOR * self.config.stale_stop_s,
             robot=self.robot.describe(),
             ft=self.ft.describe(),
             probe=self.probe.describe() if self.probe is not None else None,
@@ -417,75 +419,100 @@ class Runner:
         policy = blocks.policy
         overruns_before = pacer.overruns  # the rebias's own are not the loop's
         pressure = self._pressure  # measured while a stream is stale, to name a starved machine
+        canary = Canary()  # ordinary tasks' starvation, not counted as a device's silence
+        since: dict[Status, float] = {}  # each stale stream's flag: the canary's figure then
         stale = False
         k = 0
-        while n_max is None or k < n_max:
-            if self.stop_requested.is_set():
-                return "stopped on request", True
-            late = pacer.wait()
-            self.timing.overruns = pacer.overruns - overruns_before
-            start = time.perf_counter()
-            state = at_log_resolution(self.robot.state())  # what the log can hold: replayable
-            # the robot's watchdog counts from our last command: past it, the robot has stopped
-            # itself because this process stalled, whatever it reports now
-            starved = starved_cause(policy, f"cycle {k}", time.perf_counter() - self._commanded_s)
-            if starved is not None:
-                self._event("stop", starved)
-                return starved, False
-            problem = named_problem(self.robot, state)
-            if problem is not None:  # the robot stopped itself: nothing to compute
-                self._event("stop", problem)
-                return robot_cause(policy, problem), False
-            ft, ft_count = self.ft.mailbox.latest()
-            probe, probe_count = (
-                self.probe.mailbox.latest() if self.probe is not None else (None, 0)
-            )
-            cycle = control_cycle(
-                blocks,
-                Reading(
-                    state.p_BT_B,
-                    state.R_BT @ self.config.robot.R_TS,
-                    None if ft is None else ft.values,
-                    ft_count,
-                    None if probe is None else probe.values,
-                    probe_count,
-                ),
-                k * period,
-                period,
-                ft_error=self.ft.mailbox.error,
-                probe_error=self.probe.mailbox.error if self.probe is not None else None,
-                overload=pressure.overload() if stale else None,
-            )
-            if bool(cycle.verdict.status & _STALE) != stale:  # a window per silence
-                stale = not stale
-                if stale:
-                    pressure.start()
-                else:
-                    pressure.stop()
-            for event in cycle.events:
-                self._event(event.name, event.detail)
-                self.announce(event.announcement)
-            cause = cycle.verdict.cause
-            if cause is None:  # the watchdog counts between commands: a stall in this cycle too
-                cause = starved_cause(
-                    policy, f"the command of cycle {k}", time.perf_counter() - self._commanded_s
+        try:
+            while n_max is None or k < n_max:
+                if self.stop_requested.is_set():
+                    return "stopped on request", True
+                late = pacer.wait()
+                self.timing.overruns = pacer.overruns - overruns_before
+                start = time.perf_counter()
+                state = at_log_resolution(self.robot.state())  # what the log can hold: replayable
+                # the robot's watchdog counts from our last command: past it, the robot has stopped
+                # itself because this process stalled, whatever it reports now
+                starved = starved_cause(
+                    policy, f"cycle {k}", time.perf_counter() - self._commanded_s
                 )
-                if cause is not None:  # logged as it was: nothing sent
-                    cycle.verdict = Verdict(cycle.verdict.status, np.zeros(6), cause)
-            if cause is None:
-                self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
-                self.robot.kick_watchdog()
-                self._commanded_s = time.perf_counter()
-            compute = time.perf_counter() - start
-            self.timing.add(compute, late)
-            if self.log is not None:
-                self._k = k
-                self.log.record(CycleRecord(k, k * period, cycle, state, ft, probe, compute, late))
-            if cause is not None:
-                self._event("stop", cause)
-                return cause, False
-            k += 1
-        return f"{seconds:g} s done", True
+                if starved is not None:
+                    self._event("stop", starved)
+                    return starved, False
+                problem = named_problem(self.robot, state)
+                if problem is not None:  # the robot stopped itself: nothing to compute
+                    self._event("stop", problem)
+                    return robot_cause(policy, problem), False
+                ft, ft_count = self.ft.mailbox.latest()
+                probe, probe_count = (
+                    self.probe.mailbox.latest() if self.probe is not None else (None, 0)
+                )
+                cycle = control_cycle(
+                    blocks,
+                    Reading(
+                        state.p_BT_B,
+                        state.R_BT @ self.config.robot.R_TS,
+                        None if ft is None else ft.values,
+                        ft_count,
+                        None if probe is None else probe.values,
+                        probe_count,
+                    ),
+                    k * period,
+                    period,
+                    ft_error=self.ft.mailbox.error,
+                    probe_error=self.probe.mailbox.error if self.probe is not None else None,
+                    overload=pressure.overload() if stale else None,
+                    starved={f: canary.starved_s() - at for f, at in since.items()}
+                    if since
+                    else None,
+                )
+                for flag in _STALE_FLAGS:
+                    if cycle.verdict.status & flag:
+                        if flag not in since:
+                            since[flag] = canary.starved_s()
+                    elif flag in since:  # the stream is back: say what was not counted
+                        discounted = canary.starved_s() - since.pop(flag)
+                        if discounted >= 0.0005:
+                            name = policy.ft if flag is Status.STALE_FT else policy.probe
+                            self._event(
+                                "starved",
+                                f"{name}: {1e3 * discounted:.0f} {STARVED_TEXT}, not counted "
+                                "as its silence",
+                            )
+                if bool(cycle.verdict.status & _STALE) != stale:  # a window per silence
+                    stale = not stale
+                    if stale:
+                        pressure.start()
+                    else:
+                        pressure.stop()
+                for event in cycle.events:
+                    self._event(event.name, event.detail)
+                    self.announce(event.announcement)
+                cause = cycle.verdict.cause
+                if cause is None:  # the watchdog counts between commands: a stall in this cycle too
+                    cause = starved_cause(
+                        policy, f"the command of cycle {k}", time.perf_counter() - self._commanded_s
+                    )
+                    if cause is not None:  # logged as it was: nothing sent
+                        cycle.verdict = Verdict(cycle.verdict.status, np.zeros(6), cause)
+                if cause is None:
+                    self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
+                    self.robot.kick_watchdog()
+                    self._commanded_s = time.perf_counter()
+                compute = time.perf_counter() - start
+                self.timing.add(compute, late)
+                if self.log is not None:
+                    self._k = k
+                    self.log.record(
+                        CycleRecord(k, k * period, cycle, state, ft, probe, compute, late)
+                    )
+                if cause is not None:
+                    self._event("stop", cause)
+                    return cause, False
+                k += 1
+            return f"{seconds:g} s done", True
+        finally:
+            canary.close()
 
     # --- logging -------------------------------------------------------------------------------
 
@@ -501,7 +528,11 @@ class Runner:
         )
 
 
+_STALE_FLAGS = (Status.STALE_FT, Status.STALE_PROBE)
 _STALE = Status.STALE_FT | Status.STALE_PROBE
+STARVED_STALE_FACTOR = 4.0
+"""A stale stream ends the session after `stale_stop_s` of its silence counted while ordinary tasks
+could run, and after this many times `stale_stop_s` in any case (`SessionPolicy.stale_stop_max_s`)."""
 
 
 def _helper_threads() -> list[threading.Thread]:

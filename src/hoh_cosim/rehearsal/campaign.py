@@ -18,7 +18,11 @@ Per run the invariants (`Run.violations` names each one broken):
 
 - a fault that calls for a stop stops the session, and the arm stands still within the fault's own
   detection time (`Kind.detect_s`: the stale-stream limit, the link's silence limit, the robot's
-  watchdog) plus the watchdog's period plus `BRAKE_S`; faults that call for none do not stop it;
+  watchdog) plus the watchdog's period plus `BRAKE_S`; faults that call for none do not stop it.
+  A silent stream's stop comes later by the time ordinary tasks were starved meanwhile, which the
+  runner does not count as the device's silence and names (in the cause, or in a `starved` event
+  when the stream came back): the bound grows by it, and a stream fault whose silence was
+  discounted so may stop the session or not;
 - the session's cause names the first fault that called for a stop (the runner's last words and the
   log's `end` event), and the runner exits with its own status (0 done, 1 stopped; -9 only when it
   was the one killed; never killed by a signal of its own making, such as ur-rtde's SIGABRT);
@@ -53,6 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hoh_cosim.control.supervisor import STARVED_TEXT
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.hardware.session_log import ORPHANED_CAUSE
 from hoh_cosim.rehearsal.faults import FAULTS
@@ -91,6 +96,7 @@ class Kind:
     stops: Callable[[float], bool | None]  # duration -> must stop / must not / either may happen
     cause: str = ""  # a regular expression the session's cause matches when this kind stopped it
     detect_s: float = 0.0  # [s] how long after the fault the runner may take to see it
+    stream: str = ""  # the stream a stale-stream stop names (a regular expression), if any
 
     def calls_for_stop(self, duration_s: float) -> bool | None:
         return self.stops(duration_s)
@@ -119,13 +125,13 @@ _PROBE = r"FSE103 on \S+"
 KINDS = {
     kind.name: kind
     for kind in (
-        Kind("ft_stall", (0.02, 0.8), _stall_stops, _FT + ": no new sample", STALE_S),
+        Kind("ft_stall", (0.02, 0.8), _stall_stops, _FT + ": no new sample", STALE_S, _FT),
         Kind("ft_garbage", None, _never),
         Kind("ft_nan", (0.02, 0.2), _always, _FT + " sent a non-finite value"),
         Kind("ft_spike", (0.005, 0.05), _never),
         # the reader tries again after 0.5 s, past the stale limit however short the outage
-        Kind("ft_disconnect", (0.1, 1.0), _always, _FT + ": no new sample", STALE_S),
-        Kind("probe_unplug", None, _always, _PROBE, STALE_S),
+        Kind("ft_disconnect", (0.1, 1.0), _always, _FT + ": no new sample", STALE_S, _FT),
+        Kind("probe_unplug", None, _always, _PROBE, STALE_S, _PROBE),
         Kind("probe_garbage", None, _never),
         # an auto-detected framing is forgotten after 5 bad frames and found again after 3 good
         # ones (hoh_cosim.hardware.fse103): 160 ms at 50 Hz, inside the stale limit
@@ -520,18 +526,32 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
     from hoh_cosim.hardware.session_log import read_session
 
     v = run.violations
-    stopping = [(f, at) for f, at in run.injected if f.stops]
-    maybe = [(f, at) for f, at in run.injected if f.stops is None]
-    run.expected = "stop" if stopping else ("either" if maybe else "go on")
-    match = ENDED.search(said)
-    run.cause = match.group(1) if match else ""
-    killed = not math.isnan(killed_at)
-    # what the session ended with: the runner's words, or for a killed one its log's end
     session = None
     try:
         session = read_session(log)
     except Exception as exc:  # any failure to read the log is the finding
         v.append(f"the log cannot be read: {type(exc).__name__}: {exc}")
+    # a stream's silence while ordinary tasks were starved is not counted (the runner logs how
+    # much it left out): a fault that silenced that stream may then end the session or not
+    starved = [
+        m["detail"]
+        for m in (session.messages.get("/events", []) if session is not None else [])
+        if m["event"] == "starved"
+    ]
+
+    def stops(fault: CampaignFault) -> bool | None:
+        stream = KINDS[fault.kind].stream
+        if fault.stops and stream and any(re.match(stream, detail) for detail in starved):
+            return None
+        return fault.stops
+
+    stopping = [(f, at) for f, at in run.injected if stops(f)]
+    maybe = [(f, at) for f, at in run.injected if stops(f) is None]
+    run.expected = "stop" if stopping else ("either" if maybe else "go on")
+    match = ENDED.search(said)
+    run.cause = match.group(1) if match else ""
+    killed = not math.isnan(killed_at)
+    # what the session ended with: the runner's words, or for a killed one its log's end
     end = _end_event(session) if session is not None else None
     if killed:
         run.cause = end["detail"] if end else ""
@@ -557,7 +577,9 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
         elif not causes:
             v.append(f"the cause does not name {'/'.join(f.kind for f, _ in named)}: {run.cause!r}")
         kind = KINDS[run.first_kind]
-        run.bound_s = kind.detect_s + 1.0 / WATCHDOG_HZ + BRAKE_S
+        # a stale stream's stop comes later by the time ordinary tasks were starved, which its
+        # cause names (the supervisor does not count it as the device's silence)
+        run.bound_s = kind.detect_s + 1.0 / WATCHDOG_HZ + BRAKE_S + _discounted_s(run.cause)
         run.standstill_s = monitor.standstill_after(fault_at) - fault_at
         if not run.standstill_s <= run.bound_s:
             v.append(
@@ -590,6 +612,15 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
             v.append("the log's last FT-150 sample is more than 1 s before the kill")
     elif end is not None and (not robot or end["k"] - robot[-1]["k"] > 500):
         v.append("the log's last cycle is more than 1 s of cycles before its end")
+
+
+_DISCOUNTED = re.compile(rf"(\d+) {re.escape(STARVED_TEXT)}")
+
+
+def _discounted_s(cause: str) -> float:
+    """The starved time [s] a stale stream's stop says it did not count as silence (0: none)."""
+    match = _DISCOUNTED.search(cause)
+    return 1e-3 * int(match.group(1)) if match else 0.0
 
 
 def stream_figures(session) -> dict[str, tuple[float, float]]:
