@@ -263,6 +263,10 @@ class _Libcosim:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.execution.stop()
+        # freed now, as ecos's simulation is below, while the interpreter that runs our Python
+        # FMUs is whole: left to the garbage collector, the last references may go only at the
+        # interpreter's shutdown, and the FMUs' instances with them (libcosimpy's __del__)
+        self.execution = self.observer = self.override = None
 
 
 # --- ecos -------------------------------------------------------------------------------------

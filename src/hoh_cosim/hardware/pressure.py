@@ -1,5 +1,5 @@
 """How starved the machine's CPU is: Linux's pressure stall information (`/proc/pressure/cpu`), and
-a canary thread of ordinary priority that counts the time it could not run.
+a canary process of ordinary priority that counts the time it could not run.
 
 The kernel adds up the time during which at least one runnable task waited for a CPU ("some",
 microseconds since boot). Over a window, that time divided by the window's length says how
@@ -9,19 +9,23 @@ serial device's bytes reach the reader through a kernel worker thread that compe
 like any task). Where the file is missing (another kernel, another system) nothing is measured.
 
 The pressure says that *some* task waited; `Canary` says whether an ordinary one could run at all.
-It is a thread at the default policy and priority (SCHED_OTHER, nice 0, like the kernel worker that
-delivers a serial port's bytes), ticking every `tick_s`; a tick that comes more than `allowance_s`
-late adds its lateness to the starved time. On a machine where the real-time threads (the loop,
-the readers, a simulated world) and other work leave no CPU to ordinary tasks, the canary starves
-with the worker, and the supervisor does not count that time as the device's silence
-(`hoh_cosim.control.supervisor`).
+It is a small process at the default policy and priority (SCHED_OTHER, like the kernel worker that
+delivers a serial port's bytes), ticking every `tick_s` and writing its figures into a shared
+page; a tick that comes more than `allowance_s` late adds its lateness to the starved time. On a
+machine where the real-time threads (the loop, the readers, a simulated world) and other work leave
+no CPU to ordinary tasks, the canary starves with the worker, and the supervisor does not count
+that time as the device's silence (`hoh_cosim.control.supervisor`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import mmap
 import os
-import threading
+import struct
+import subprocess
+import sys
+import tempfile
 import time
 
 __all__ = ["OVERLOADED", "Canary", "CpuPressure"]
@@ -103,37 +107,61 @@ class CpuPressure:
             self._fd = None
 
 
+CANARY_CODE = """
+import mmap, os, struct, sys, time
+fd, tick_s, allowance_s, parent = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), os.getppid()
+page = mmap.mmap(fd, 16)
+starved, last = 0.0, time.monotonic()
+struct.pack_into("d", page, 8, last)
+while os.getppid() == parent:  # the runner gone (even killed), the canary goes too
+    time.sleep(tick_s)
+    now = time.monotonic()
+    late, last = now - last - allowance_s, now
+    struct.pack_into("d", page, 8, last)  # before the total: see Canary.starved_s
+    if late > 0.0:
+        starved += late
+        struct.pack_into("d", page, 0, starved)
+"""
+
+
 class Canary:
-    """A daemon thread of ordinary priority whose late ticks measure how long ordinary tasks were
-    starved of the CPU. `starved_s()` is the total so far, a tick still overdue included."""
+    """A process of ordinary priority whose late ticks measure how long ordinary tasks were starved
+    of the CPU. `starved_s()` is the total so far, a tick still overdue included.
+
+    A process, not a thread: a thread of ordinary priority would hold the runner's GIL while it
+    ticks, and a starved one would hold it for as long as it starves, with the real-time loop
+    waiting for it (seen: 715 ms, in a loaded suite)."""
 
     def __init__(self, tick_s: float = 0.005, allowance_s: float = 0.02) -> None:
-        self.tick_s, self.allowance_s = tick_s, allowance_s
-        self._last = time.monotonic()
-        self._starved = 0.0
-        self._done = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="hoh-canary", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        # ordinary, whatever the thread that made it runs at (a new thread inherits the policy)
-        with contextlib.suppress(OSError, AttributeError):
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        while not self._done.wait(self.tick_s):
-            now = time.monotonic()
-            late = now - self._last - self.allowance_s
-            self._last = now  # before the sum: see starved_s
-            if late > 0.0:
-                self._starved += late
+        self.allowance_s = allowance_s
+        self._file = tempfile.TemporaryFile(  # noqa: SIM115 - closed by close()
+            dir="/dev/shm" if os.path.isdir("/dev/shm") else None
+        )
+        self._file.truncate(16)
+        self._page = mmap.mmap(self._file.fileno(), 16)
+        # until its first tick the canary counts as having just ticked, however slowly it starts
+        _DOUBLE.pack_into(self._page, 8, time.monotonic() + 1.0)
+        fd = self._file.fileno()
+        self._process = subprocess.Popen(
+            [sys.executable, "-S", "-c", CANARY_CODE, str(fd), repr(tick_s), repr(allowance_s)],
+            pass_fds=(fd,),
+            stdin=subprocess.DEVNULL,
+        )
 
     def starved_s(self) -> float:
         """Seconds the canary could not run beyond its allowance, since it started, up to now."""
-        # the tick writes `_last` before `_starved`, this reads them the other way round: a tick
-        # in between can only leave its lateness out, never count it twice
-        starved, last = self._starved, self._last
+        # the canary writes its last tick before its total, this reads them the other way round:
+        # a tick in between can only leave its lateness out, never count it twice
+        (starved,) = _DOUBLE.unpack_from(self._page, 0)
+        (last,) = _DOUBLE.unpack_from(self._page, 8)
         return starved + max(0.0, time.monotonic() - last - self.allowance_s)
 
     def close(self) -> None:
-        self._done.set()
-        if self._thread is not threading.current_thread():
-            self._thread.join(timeout=1.0)
+        if self._process.poll() is None:
+            self._process.kill()
+        self._process.wait()
+        self._page.close()
+        self._file.close()
+
+
+_DOUBLE = struct.Struct("d")

@@ -195,6 +195,7 @@ class Runner:
         self.stop_requested = threading.Event()
         self.timing = CycleTiming()
         self._pressure = CpuPressure()
+        self._canary: Canary | None = None  # from the rebias on: see run
         self._commanded_s = math.inf  # perf_counter of the last command or kick
         self._k = 0
 
@@ -357,6 +358,7 @@ class Runner:
         rebias: Rebias | None = None
         cause, clean = "", False
         sources = [s for s in (self.ft, self.probe) if s is not None]
+        canary: Canary | None = None
         try:
             # a filter imports its library when it is built or first stepped (up to a second):
             # imported now, not between two of the watchdog's cycles below
@@ -366,6 +368,7 @@ class Runner:
             for source in sources:
                 source.start()
             self._wait_for_samples(5.0)
+            canary = self._canary = Canary()  # ordinary tasks' starvation (the loop reads it)
             # from the first command on, the robot's watchdog wants a kick every cycle: nothing slow
             # (a garbage collection, building the blocks) may come between two cycles
             with _realtime_interpreter(
@@ -403,6 +406,8 @@ class Runner:
                 self.log.close()
             self.robot.close()
             self._pressure.close()
+            if canary is not None:
+                canary.close()
         return SessionResult(self.timing.cycles, cause, clean, self.timing, rebias)
 
     def _loop(
@@ -419,100 +424,92 @@ class Runner:
         policy = blocks.policy
         overruns_before = pacer.overruns  # the rebias's own are not the loop's
         pressure = self._pressure  # measured while a stream is stale, to name a starved machine
-        canary = Canary()  # ordinary tasks' starvation, not counted as a device's silence
+        canary = self._canary  # ordinary tasks' starvation, not counted as a device's silence
+        assert canary is not None  # made by run
         since: dict[Status, float] = {}  # each stale stream's flag: the canary's figure then
         stale = False
         k = 0
-        try:
-            while n_max is None or k < n_max:
-                if self.stop_requested.is_set():
-                    return "stopped on request", True
-                late = pacer.wait()
-                self.timing.overruns = pacer.overruns - overruns_before
-                start = time.perf_counter()
-                state = at_log_resolution(self.robot.state())  # what the log can hold: replayable
-                # the robot's watchdog counts from our last command: past it, the robot has stopped
-                # itself because this process stalled, whatever it reports now
-                starved = starved_cause(
-                    policy, f"cycle {k}", time.perf_counter() - self._commanded_s
+        while n_max is None or k < n_max:
+            if self.stop_requested.is_set():
+                return "stopped on request", True
+            late = pacer.wait()
+            self.timing.overruns = pacer.overruns - overruns_before
+            start = time.perf_counter()
+            state = at_log_resolution(self.robot.state())  # what the log can hold: replayable
+            # the robot's watchdog counts from our last command: past it, the robot has stopped
+            # itself because this process stalled, whatever it reports now
+            starved = starved_cause(policy, f"cycle {k}", time.perf_counter() - self._commanded_s)
+            if starved is not None:
+                self._event("stop", starved)
+                return starved, False
+            problem = named_problem(self.robot, state)
+            if problem is not None:  # the robot stopped itself: nothing to compute
+                self._event("stop", problem)
+                return robot_cause(policy, problem), False
+            ft, ft_count = self.ft.mailbox.latest()
+            probe, probe_count = (
+                self.probe.mailbox.latest() if self.probe is not None else (None, 0)
+            )
+            cycle = control_cycle(
+                blocks,
+                Reading(
+                    state.p_BT_B,
+                    state.R_BT @ self.config.robot.R_TS,
+                    None if ft is None else ft.values,
+                    ft_count,
+                    None if probe is None else probe.values,
+                    probe_count,
+                ),
+                k * period,
+                period,
+                ft_error=self.ft.mailbox.error,
+                probe_error=self.probe.mailbox.error if self.probe is not None else None,
+                overload=pressure.overload() if stale else None,
+                starved={f: canary.starved_s() - at for f, at in since.items()} if since else None,
+            )
+            for flag in _STALE_FLAGS:
+                if cycle.verdict.status & flag:
+                    if flag not in since:
+                        since[flag] = canary.starved_s()
+                elif flag in since:  # the stream is back: say what was not counted
+                    discounted = canary.starved_s() - since.pop(flag)
+                    if discounted >= 0.0005:
+                        name = policy.ft if flag is Status.STALE_FT else policy.probe
+                        self._event(
+                            "starved",
+                            f"{name}: {1e3 * discounted:.0f} {STARVED_TEXT}, not counted "
+                            "as its silence",
+                        )
+            if bool(cycle.verdict.status & _STALE) != stale:  # a window per silence
+                stale = not stale
+                if stale:
+                    pressure.start()
+                else:
+                    pressure.stop()
+            for event in cycle.events:
+                self._event(event.name, event.detail)
+                self.announce(event.announcement)
+            cause = cycle.verdict.cause
+            if cause is None:  # the watchdog counts between commands: a stall in this cycle too
+                cause = starved_cause(
+                    policy, f"the command of cycle {k}", time.perf_counter() - self._commanded_s
                 )
-                if starved is not None:
-                    self._event("stop", starved)
-                    return starved, False
-                problem = named_problem(self.robot, state)
-                if problem is not None:  # the robot stopped itself: nothing to compute
-                    self._event("stop", problem)
-                    return robot_cause(policy, problem), False
-                ft, ft_count = self.ft.mailbox.latest()
-                probe, probe_count = (
-                    self.probe.mailbox.latest() if self.probe is not None else (None, 0)
-                )
-                cycle = control_cycle(
-                    blocks,
-                    Reading(
-                        state.p_BT_B,
-                        state.R_BT @ self.config.robot.R_TS,
-                        None if ft is None else ft.values,
-                        ft_count,
-                        None if probe is None else probe.values,
-                        probe_count,
-                    ),
-                    k * period,
-                    period,
-                    ft_error=self.ft.mailbox.error,
-                    probe_error=self.probe.mailbox.error if self.probe is not None else None,
-                    overload=pressure.overload() if stale else None,
-                    starved={f: canary.starved_s() - at for f, at in since.items()}
-                    if since
-                    else None,
-                )
-                for flag in _STALE_FLAGS:
-                    if cycle.verdict.status & flag:
-                        if flag not in since:
-                            since[flag] = canary.starved_s()
-                    elif flag in since:  # the stream is back: say what was not counted
-                        discounted = canary.starved_s() - since.pop(flag)
-                        if discounted >= 0.0005:
-                            name = policy.ft if flag is Status.STALE_FT else policy.probe
-                            self._event(
-                                "starved",
-                                f"{name}: {1e3 * discounted:.0f} {STARVED_TEXT}, not counted "
-                                "as its silence",
-                            )
-                if bool(cycle.verdict.status & _STALE) != stale:  # a window per silence
-                    stale = not stale
-                    if stale:
-                        pressure.start()
-                    else:
-                        pressure.stop()
-                for event in cycle.events:
-                    self._event(event.name, event.detail)
-                    self.announce(event.announcement)
-                cause = cycle.verdict.cause
-                if cause is None:  # the watchdog counts between commands: a stall in this cycle too
-                    cause = starved_cause(
-                        policy, f"the command of cycle {k}", time.perf_counter() - self._commanded_s
-                    )
-                    if cause is not None:  # logged as it was: nothing sent
-                        cycle.verdict = Verdict(cycle.verdict.status, np.zeros(6), cause)
-                if cause is None:
-                    self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
-                    self.robot.kick_watchdog()
-                    self._commanded_s = time.perf_counter()
-                compute = time.perf_counter() - start
-                self.timing.add(compute, late)
-                if self.log is not None:
-                    self._k = k
-                    self.log.record(
-                        CycleRecord(k, k * period, cycle, state, ft, probe, compute, late)
-                    )
-                if cause is not None:
-                    self._event("stop", cause)
-                    return cause, False
-                k += 1
-            return f"{seconds:g} s done", True
-        finally:
-            canary.close()
+                if cause is not None:  # logged as it was: nothing sent
+                    cycle.verdict = Verdict(cycle.verdict.status, np.zeros(6), cause)
+            if cause is None:
+                self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
+                self.robot.kick_watchdog()
+                self._commanded_s = time.perf_counter()
+            compute = time.perf_counter() - start
+            self.timing.add(compute, late)
+            if self.log is not None:
+                self._k = k
+                self.log.record(CycleRecord(k, k * period, cycle, state, ft, probe, compute, late))
+            if cause is not None:
+                self._event("stop", cause)
+                return cause, False
+            k += 1
+        return f"{seconds:g} s done", True
 
     # --- logging -------------------------------------------------------------------------------
 
