@@ -32,6 +32,7 @@ from hoh_cosim.hardware.session_log import (
     FLOAT32,
     NONFINITE,
     RESOLUTION,
+    T0_KEY,
     CycleRow,
     Session,
     SessionLog,
@@ -402,7 +403,7 @@ def test_the_schemas_refuse_what_they_should():
     from jsonschema import Draft202012Validator
 
     robot = Draft202012Validator(channel_schema("/robot"))
-    good = {"k": 1, "t": 0.002, "p_BT_B": [0.1, 0.2, 0.3], "rotvec_BT": [1.0] * 3,
+    good = {"k": 1, "p_BT_B": [0.1, 0.2, 0.3], "rotvec_BT": [1.0] * 3,
             "twist_B": [0.0] * 6, "robot_mode": 7, "safety_mode": 1, "protective_stop": False,
             "emergency_stop": False, "program_running": True}  # fmt: skip
     assert robot.is_valid(good)
@@ -473,7 +474,7 @@ def test_the_mcap_packages_own_reader_reads_the_same_messages(written, session):
     assert summary.statistics.message_count == total
     assert len(metadata) == 1
     by_topic: dict[str, list[dict[str, Any]]] = {}
-    first_log_time = None
+    previous = 0
     for schema, channel, message in records:
         assert schema is not None
         assert schema.encoding == "jsonschema"
@@ -483,13 +484,18 @@ def test_the_mcap_packages_own_reader_reads_the_same_messages(written, session):
         document = json.loads(schema.data)
         assert set(data) <= set(document["properties"]), channel.topic
         assert set(document["required"]) <= set(data), channel.topic
-        by_topic.setdefault(channel.topic, []).append(decode_message(data))
-        if channel.topic == "/robot":
-            if first_log_time is None:
-                first_log_time = message.log_time
-            # log times run with the session time t of each cycle
-            assert message.log_time - first_log_time == int(data["t"] * 1e9)
-            assert message.publish_time == message.log_time
+        # the session time is the record's log time after t0, and log times never go back
+        assert "t" not in data
+        assert message.log_time >= previous
+        assert message.publish_time == message.log_time
+        previous = message.log_time
+        decoded = decode_message(data)
+        t0_ns = int(channel.metadata[T0_KEY])  # each channel says when session time 0 was
+        decoded["t"] = round((message.log_time - t0_ns) * 1e-9, 9)
+        if channel.topic == "/command":  # written where they differ from the command
+            for name in ("twist_law_B", "sent_B"):
+                decoded.setdefault(name, decoded["twist_B"])
+        by_topic.setdefault(channel.topic, []).append(decoded)
     assert same(by_topic, {t: m for t, m in session.messages.items() if m})
 
 

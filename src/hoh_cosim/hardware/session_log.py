@@ -13,8 +13,12 @@ so the file opens in Foxglove and in the `mcap` Python package alike:
     /timing     the cycle's compute time and how late it started
     /events     what happened: the rebias, the parameters, a stop and its cause, the end
 
-Every message carries the cycle number `k` and the session time `t` [s] of the cycle start. The
-session's description is a metadata record; the effective parameters, known after the rebias, are the
+Every message carries the cycle number `k`; its record's log time is the cycle's start, `t` [s] of
+session time after `t0_unix_ns` (in each channel's metadata), and `read_session` gives each message that `t`
+back (older logs wrote it into every message). The command's `twist_law_B` and `sent_B` are written
+only where they differ from `twist_B` (a clamp, a stop), and read back equal to it where absent;
+in a session they are the same numbers nearly every cycle. The session's description is a metadata
+record; the effective parameters, known after the rebias, are the
 `parameters` event, so a log can be replayed with exactly the settings that produced it.
 
 The control loop never writes the file, nor even encodes a message. It copies each cycle, as one row
@@ -68,6 +72,7 @@ __all__ = [
     "NONFINITE",
     "ORPHANED_CAUSE",
     "RESOLUTION",
+    "T0_KEY",
     "ZSTD_LEVEL",
     "CycleRecord",
     "CycleRow",
@@ -154,10 +159,17 @@ RESOLUTION: dict[tuple[str, str], int | str] = {
 }
 """Decimals each float field is written with (see the module's docstring); `t` to 1 ns."""
 
-ZSTD_LEVEL = 9
+ZSTD_LEVEL = 17
 """The chunks' zstd level, chosen by measurement (docs/decisions.md): level 3, the mcap writer's own,
-writes a third more; 12 and 15 gain nothing over 9; 19 a sixth less for 30 times the time (a fifth
-of a core, beside the loop)."""
+writes a third more than 9; 12 and 15 gain nothing over 9; 17 a tenth less than 9 for about 5 s of
+the writer's CPU per minute of session (a twelfth of a core, at nice 5 beside a real-time loop);
+19 a little less again for a fifth of a core."""
+
+T0_KEY = "t0_unix_ns"
+"""The key of each channel's metadata that gives the log time of session time 0 [ns]."""
+
+_SAME_AS_COMMAND = ("twist_law_B", "sent_B")
+"""The /command fields that are left out where they equal `twist_B` (the module's docstring)."""
 
 ORPHANED_CAUSE = "the runner process ended without closing the log"
 """The `end` event's detail the writer gives when its runner is gone before saying how it ended."""
@@ -257,7 +269,7 @@ def _is_float(kind: Mapping[str, Any]) -> bool:
 def channel_schema(topic: str) -> dict[str, Any]:
     """The JSON schema of a channel's messages: every field named, nothing else allowed; the
     fields that hold floats may be absent only when `NONFINITE` gives them."""
-    properties = {"k": _INT, "t": _NUM, **CHANNELS[topic]}
+    properties = {"k": _INT, **CHANNELS[topic]}
     floats = {
         name: (
             {
@@ -276,7 +288,7 @@ def channel_schema(topic: str) -> dict[str, Any]:
         "title": f"hoh-cosim {topic}",
         "type": "object",
         "properties": properties,
-        "required": ["k", "t", *(n for n, kind in CHANNELS[topic].items() if not _is_float(kind))],
+        "required": ["k", *(n for n, kind in CHANNELS[topic].items() if not _is_float(kind))],
         "additionalProperties": False,
     }
     if floats:
@@ -314,7 +326,7 @@ def _messages(
     """A cycle row as the messages of its channels, each number at its `RESOLUTION`. With
     `counts` (the sensor channels' last written sample counts, updated here), a sensor's message
     only when its sample is new."""
-    k, t, has_ft, has_probe = int(row[0]), round(float(row[1]), 9), row[2] > 0.5, row[3] > 0.5
+    k, has_ft, has_probe = int(row[0]), row[2] > 0.5, row[3] > 0.5
     out: dict[str, dict[str, Any]] = {}
     at = _HEAD
     skip: set[str] = set()
@@ -334,7 +346,7 @@ def _messages(
                 out.pop(topic, None)
                 continue
             counts[topic] = count
-        message = out.setdefault(topic, {"k": k, "t": t})
+        message = out.setdefault(topic, {"k": k})
         if (kind is _VECTOR or kind is _NUM) and not np.all(np.isfinite(values)):
             text = [_text(x) for x in _rounded(values, RESOLUTION.get((topic, name)))]
             message.setdefault(NONFINITE, {})[name] = text if kind is _VECTOR else text[0]
@@ -347,7 +359,11 @@ def _messages(
     if "/command" in out:
         from hoh_cosim.control.supervisor import Status
 
-        out["/command"]["status_text"] = Status(out["/command"]["status"]).describe()
+        command = out["/command"]
+        for name in _SAME_AS_COMMAND:  # written where they differ (the module's docstring)
+            if name in command and command[name] == command.get("twist_B"):
+                del command[name]
+        command["status_text"] = Status(command["status"]).describe()
     return list(out.items())
 
 
@@ -447,14 +463,18 @@ def _writer_main(
                 data=json.dumps(channel_schema(topic)).encode(),
             )
             channels[topic] = writer.register_channel(
-                topic=topic, message_encoding="json", schema_id=schema
+                topic=topic,
+                message_encoding="json",
+                schema_id=schema,
+                metadata={T0_KEY: str(t0_unix_ns)},  # in a chunk, under its CRC
             )
         writer.add_metadata("session", {k: json.dumps(v) for k, v in metadata.items()})
         writer.flush()
 
         def add(topic: str, t: float, message: dict[str, Any]) -> None:
-            log_ns = t0_unix_ns + int(t * 1e9)
-            data = json.dumps(message, allow_nan=False).encode()  # strict JSON, as browsers read
+            log_ns = t0_unix_ns + round(t * 1e9)
+            # strict JSON, as browsers read, without spaces
+            data = json.dumps(message, allow_nan=False, separators=(",", ":")).encode()
             writer.add_message(channels[topic], log_ns, data, log_ns)
 
         ended = False  # the runner's `end` event came
@@ -467,11 +487,12 @@ def _writer_main(
                 except queue.Empty:
                     return
                 ended = ended or event == "end"
-                add("/events", t, {"k": k, "t": t, "event": event, "detail": detail})
+                add("/events", t, {"k": k, "event": event, "detail": detail})
 
         def overflow(first: int, lost: int) -> None:
             detail = f"{lost} cycles were not logged"
-            add("/events", 0.0, {"k": first, "t": 0.0, "event": "log_overflow", "detail": detail})
+            # at the last cycle written before them: the log's times only ever go forward
+            add("/events", last[1], {"k": first, "event": "log_overflow", "detail": detail})
 
         done, last_flush = 0, time.monotonic()
         counts: dict[str, int] = {}  # the sensor channels' last written sample counts
@@ -502,7 +523,7 @@ def _writer_main(
                 if orphaned and not ended:  # killed: the log still says how the session ended
                     k, t = last
                     detail = f"{ORPHANED_CAUSE} (killed or crashed) after cycle {k}"
-                    add("/events", t, {"k": k, "t": t, "event": "end", "detail": detail})
+                    add("/events", t, {"k": k, "event": "end", "detail": detail})
                 break
             if time.monotonic() - last_flush >= flush_s:
                 writer.flush()
@@ -651,18 +672,28 @@ def read_session(path: str | Path) -> Session:
         raise InputFileError(path, "", f"cannot read: {exc.strerror}") from None
     session = Session(path, {}, {topic: [] for topic in CHANNELS}, complete=False)
     topics: dict[int, str] = {}
+    t0s: dict[int, int] = {}  # per channel: the log time of session time 0 [ns]
     with stream:
         try:
             for record in StreamReader(stream, validate_crcs=True).records:
                 if isinstance(record, Channel):
                     topics[record.id] = record.topic
+                    t0s[record.id] = int(record.metadata.get(T0_KEY, "0"))
                 elif isinstance(record, Message):
                     topic = topics.get(record.channel_id)
                     if topic is not None:
                         message = json.loads(record.data)
                         if not isinstance(message, dict):
                             raise ValueError(f"a {topic} message that is not a JSON object")
-                        session.messages.setdefault(topic, []).append(decode_message(message))
+                        message = decode_message(message)
+                        if "t" not in message:  # the session time of its record's log time
+                            t0_ns = t0s[record.channel_id]
+                            message["t"] = round((record.log_time - t0_ns) * 1e-9, 9)
+                        if topic == "/command":
+                            for name in _SAME_AS_COMMAND:  # left out where equal
+                                if name not in message and "twist_B" in message:
+                                    message[name] = list(message["twist_B"])
+                        session.messages.setdefault(topic, []).append(message)
                 elif isinstance(record, Metadata) and record.name == "session":
                     session.metadata = {k: json.loads(v) for k, v in record.metadata.items()}
                 elif isinstance(record, Footer):
