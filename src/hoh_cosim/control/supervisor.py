@@ -22,7 +22,7 @@ named as the loop's. The device's silence is counted only while ordinary tasks c
 the bytes of a serial port (and of a pseudo-terminal) reach the reader through a kernel worker at
 ordinary priority, which the loop's own real-time threads and a loaded machine can starve for
 longer than `stale_stop_s`, with a perfectly healthy device. The runner measures that starvation
-with a canary thread of ordinary priority (`hoh_cosim.hardware.pressure.Canary`) from the cycle a
+with a canary process of ordinary priority (`hoh_cosim.hardware.pressure.Canary`) from the cycle a
 stream turns stale on; the session ends once the stream's age less that starved time reaches
 `stale_stop_s`, or its age alone reaches `stale_stop_max_s`, whatever the machine does. The
 command is zero all the while, so the arm stands still. A stop names the starved time it

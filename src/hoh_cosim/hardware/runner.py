@@ -426,8 +426,8 @@ class Runner:
         pressure = self._pressure  # measured while a stream is stale, to name a starved machine
         canary = self._canary  # ordinary tasks' starvation, not counted as a device's silence
         assert canary is not None  # made by run
-        since: dict[Status, float] = {}  # each stale stream's flag: the canary's figure then
-        stale = False
+        # each stale stream's flag: the canary's figure when it turned stale (none: no stream is)
+        since: dict[Status, float] = {}
         k = 0
         while n_max is None or k < n_max:
             if self.stop_requested.is_set():
@@ -464,25 +464,19 @@ class Runner:
                 period,
                 ft_error=self.ft.mailbox.error,
                 probe_error=self.probe.mailbox.error if self.probe is not None else None,
-                overload=pressure.overload() if stale else None,
-                starved={f: canary.starved_s() - at for f, at in since.items()} if since else None,
+                overload=pressure.overload() if since else None,
+                starved=self._starved_since(since),
             )
-            for flag in _STALE_FLAGS:
-                if cycle.verdict.status & flag:
-                    if flag not in since:
-                        since[flag] = canary.starved_s()
-                elif flag in since:  # the stream is back: say what was not counted
-                    discounted = canary.starved_s() - since.pop(flag)
-                    if discounted >= 0.0005:
-                        name = policy.ft if flag is Status.STALE_FT else policy.probe
-                        self._event(
-                            "starved",
-                            f"{name}: {1e3 * discounted:.0f} {STARVED_TEXT}, not counted "
-                            "as its silence",
-                        )
-            if bool(cycle.verdict.status & _STALE) != stale:  # a window per silence
-                stale = not stale
-                if stale:
+            was_stale = bool(since)
+            if was_stale or cycle.verdict.status & _STALE:
+                starved = canary.starved_s()
+                for flag in _STALE_FLAGS:
+                    if cycle.verdict.status & flag:
+                        since.setdefault(flag, starved)
+                    elif flag in since:  # the stream is back: say what was not counted
+                        self._not_counted(flag, starved - since.pop(flag), policy)
+            if bool(since) != was_stale:  # a pressure window per silence
+                if since:
                     pressure.start()
                 else:
                     pressure.stop()
@@ -510,6 +504,20 @@ class Runner:
                 return cause, False
             k += 1
         return f"{seconds:g} s done", True
+
+    def _starved_since(self, since: dict[Status, float]) -> dict[Status, float] | None:
+        """For each stale stream, how long ordinary tasks were starved since it turned stale."""
+        if not since or self._canary is None:
+            return None
+        starved = self._canary.starved_s()
+        return {flag: starved - at for flag, at in since.items()}
+
+    def _not_counted(self, flag: Status, discounted: float, policy: SessionPolicy) -> None:
+        """Log the starved time a stream that came back did not have counted as its silence."""
+        if discounted >= 0.0005:
+            name = policy.ft if flag is Status.STALE_FT else policy.probe
+            detail = f"{name}: {1e3 * discounted:.0f} {STARVED_TEXT}, not counted as its silence"
+            self._event("starved", detail)
 
     # --- logging -------------------------------------------------------------------------------
 

@@ -14,12 +14,12 @@ so the file opens in Foxglove and in the `mcap` Python package alike:
     /events     what happened: the rebias, the parameters, a stop and its cause, the end
 
 Every message carries the cycle number `k`; its record's log time is the cycle's start, `t` [s] of
-session time after `t0_unix_ns` (in each channel's metadata), and `read_session` gives each message that `t`
-back (older logs wrote it into every message). The command's `twist_law_B` and `sent_B` are written
-only where they differ from `twist_B` (a clamp, a stop), and read back equal to it where absent;
-in a session they are the same numbers nearly every cycle. The session's description is a metadata
-record; the effective parameters, known after the rebias, are the
-`parameters` event, so a log can be replayed with exactly the settings that produced it.
+session time after `t0_unix_ns` (in each channel's metadata), and `read_session` gives each message
+that `t` back (older logs wrote it into every message). The command's `twist_law_B` and `sent_B`
+are written only where they differ from `twist_B` (a clamp, a stop), and read back equal to it
+where absent; in a session they are the same numbers nearly every cycle. The session's description
+is a metadata record; the effective parameters, known after the rebias, are the `parameters`
+event, so a log can be replayed with exactly the settings that produced it.
 
 The control loop never writes the file, nor even encodes a message. It copies each cycle, as one row
 of floats in a fixed layout (`CYCLE_LAYOUT`), into a ring buffer in shared memory, a few
@@ -157,7 +157,7 @@ RESOLUTION: dict[tuple[str, str], int | str] = {
     ("/timing", "compute_s"): 5,  # 10 µs (the runner's own histogram reports to 1 µs)
     ("/timing", "late_s"): 5,
 }
-"""Decimals each float field is written with (see the module's docstring); `t` to 1 ns."""
+"""Decimals each float field is written with (see the module's docstring); log times to 1 ns."""
 
 ZSTD_LEVEL = 17
 """The chunks' zstd level, chosen by measurement (docs/decisions.md): level 3, the mcap writer's own,
