@@ -170,20 +170,58 @@ def test_the_canary_counts_the_time_it_could_not_run():
     canary = Canary(tick_s=0.005, allowance_s=0.02)
     try:
         time.sleep(0.3)  # started, and ticking
-        assert canary.starved_s() < 0.1  # a tick at most 100 ms late on a busy machine
+        assert canary.since((0.0,) * len(canary.cores)) < 0.1  # ticks at most 100 ms late
         before = canary.starved_s()
         os.kill(canary._process.pid, signal.SIGSTOP)
         time.sleep(0.4)
-        overdue = canary.starved_s() - before  # read while it is stopped: counted already
+        overdue = canary.since(before)  # read while it is stopped: counted already
         os.kill(canary._process.pid, signal.SIGCONT)
         time.sleep(0.1)
-        after = canary.starved_s() - before  # and once it ticked again
+        after = canary.since(before)  # and once it ticked again
     finally:
         canary.close()
     # 400 ms stopped, less the 20 ms allowance; a busy machine may add, never take away
     assert 0.37 <= overdue <= 0.8
     assert 0.37 <= after <= 0.9
     assert after >= overdue - 0.005
+
+
+PINNED_FIFO_HOG = """
+import os, sys, time
+os.sched_setaffinity(0, {int(sys.argv[1])})
+os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
+end = time.monotonic() + float(sys.argv[2])
+while time.monotonic() < end:
+    pass
+"""
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two cores")
+def test_the_canary_sees_one_core_starved_while_the_other_is_free():
+    # Real-time work on one core starves that core's ordinary tasks (such as the kernel worker
+    # queued there with a serial port's bytes) while the other core runs ordinary tasks freely:
+    # a canary free to run anywhere moves to the free core and sees nothing of it.
+    canary = Canary(tick_s=0.005, allowance_s=0.02)
+    hog_s = 0.4
+    try:
+        time.sleep(0.3)
+        core = canary.cores[-1]
+        before = canary.starved_s()
+        hog = subprocess.run(
+            [sys.executable, "-S", "-c", PINNED_FIFO_HOG, str(core), str(hog_s)],
+            capture_output=True,
+            text=True,
+        )
+        time.sleep(0.05)
+        starved = canary.since(before)
+        per_core = dict(zip(canary.cores, np.subtract(canary.starved_s(), before), strict=True))
+    finally:
+        canary.close()
+    if hog.returncode != 0:
+        pytest.skip(f"no real-time priority for the hog here: {hog.stderr.strip()[-200:]}")
+    # 400 ms on that core, less the allowance; a busy machine may add to it
+    assert 0.3 <= starved <= 1.0, per_core
+    assert per_core[core] == pytest.approx(starved), per_core
 
 
 def test_the_canary_ends_with_its_parent():

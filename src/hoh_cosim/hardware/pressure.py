@@ -108,53 +108,98 @@ class CpuPressure:
 
 
 CANARY_CODE = """
-import mmap, os, struct, sys, time
+import mmap, os, struct, sys, threading, time
 fd, tick_s, allowance_s, parent = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), os.getppid()
-page = mmap.mmap(fd, 16)
-starved, last = 0.0, time.monotonic()
-struct.pack_into("d", page, 8, last)
-while os.getppid() == parent:  # the runner gone (even killed), the canary goes too
-    time.sleep(tick_s)
-    now = time.monotonic()
-    late, last = now - last - allowance_s, now
-    struct.pack_into("d", page, 8, last)  # before the total: see Canary.starved_s
-    if late > 0.0:
-        starved += late
-        struct.pack_into("d", page, 0, starved)
+cores = [int(core) for core in sys.argv[4].split(",")]
+page = mmap.mmap(fd, 16 * len(cores))
+def tick(slot, core):
+    try:  # this thread on this core alone: it starves when that core's ordinary tasks do
+        os.sched_setaffinity(threading.get_native_id(), {core})
+    except OSError:  # the core was taken away meanwhile: the thread still ticks, anywhere
+        pass
+    starved, last = 0.0, time.monotonic()
+    struct.pack_into("d", page, 16 * slot + 8, last)
+    while os.getppid() == parent:  # the runner gone (even killed), the canary goes too
+        time.sleep(tick_s)
+        now = time.monotonic()
+        late, last = now - last - allowance_s, now
+        struct.pack_into("d", page, 16 * slot + 8, last)  # before the total: see Canary.starved_s
+        if late > 0.0:
+            starved += late
+            struct.pack_into("d", page, 16 * slot, starved)
+threads = [threading.Thread(target=tick, args=slot_core) for slot_core in enumerate(cores)]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
 """
 
 
 class Canary:
     """A process of ordinary priority whose late ticks measure how long ordinary tasks were starved
-    of the CPU. `starved_s()` is the total so far, a tick still overdue included.
+    of the CPU, on each core apart: one thread per core the runner may use, bound to that core.
+    `starved_s()` is each core's total so far, a tick still overdue included; `since(mark)` the
+    most any core starved since `starved_s()` returned `mark`.
 
-    A process, not a thread: a thread of ordinary priority would hold the runner's GIL while it
-    ticks, and a starved one would hold it for as long as it starves, with the real-time loop
-    waiting for it (seen: 715 ms, in a loaded suite)."""
+    Per core, because an ordinary task waits on the core it was queued on: a serial port's bytes
+    are delivered by a kernel worker that can wait on a core monopolised by real-time work while
+    the other core runs ordinary tasks freely (one unbound canary, on the free core, saw nothing
+    of it: a spurious "no new sample for 252 ms" in a loaded suite). The most any core starved
+    is at least what the worker waited; it may be more, and the supervisor's cap on a stale
+    stream's age (`stale_stop_max_s`) bounds what that costs.
+
+    A process, not a thread of the runner: a thread of ordinary priority would hold the runner's
+    GIL while it ticks, and a starved one would hold it for as long as it starves, with the
+    real-time loop waiting for it (seen: 715 ms, in a loaded suite). Within the canary a starved
+    thread holding the GIL only delays the other cores' threads by as long as its own core
+    starves, which the most over cores counts anyway."""
 
     def __init__(self, tick_s: float = 0.005, allowance_s: float = 0.02) -> None:
         self.allowance_s = allowance_s
+        self.cores = tuple(sorted(os.sched_getaffinity(0)))
+        size = _SLOT * len(self.cores)
         self._file = tempfile.TemporaryFile(  # noqa: SIM115 - closed by close()
             dir="/dev/shm" if os.path.isdir("/dev/shm") else None
         )
-        self._file.truncate(16)
-        self._page = mmap.mmap(self._file.fileno(), 16)
-        # until its first tick the canary counts as having just ticked, however slowly it starts
-        _DOUBLE.pack_into(self._page, 8, time.monotonic() + 1.0)
+        self._file.truncate(size)
+        self._page = mmap.mmap(self._file.fileno(), size)
+        # until its first tick a core's thread counts as having just ticked, however slowly the
+        # canary starts
+        for slot in range(len(self.cores)):
+            _DOUBLE.pack_into(self._page, _SLOT * slot + 8, time.monotonic() + 1.0)
         fd = self._file.fileno()
+        cores = ",".join(str(core) for core in self.cores)
         self._process = subprocess.Popen(
-            [sys.executable, "-S", "-c", CANARY_CODE, str(fd), repr(tick_s), repr(allowance_s)],
+            [
+                sys.executable,
+                "-S",
+                "-c",
+                CANARY_CODE,
+                str(fd),
+                repr(tick_s),
+                repr(allowance_s),
+                cores,
+            ],
             pass_fds=(fd,),
             stdin=subprocess.DEVNULL,
         )
 
-    def starved_s(self) -> float:
-        """Seconds the canary could not run beyond its allowance, since it started, up to now."""
-        # the canary writes its last tick before its total, this reads them the other way round:
-        # a tick in between can only leave its lateness out, never count it twice
-        (starved,) = _DOUBLE.unpack_from(self._page, 0)
-        (last,) = _DOUBLE.unpack_from(self._page, 8)
-        return starved + max(0.0, time.monotonic() - last - self.allowance_s)
+    def starved_s(self) -> tuple[float, ...]:
+        """Per core (in the order of `cores`), the seconds its thread could not run beyond its
+        allowance, since the canary started, up to now."""
+        now = time.monotonic()
+        totals = []
+        for slot in range(len(self.cores)):
+            # a thread writes its last tick before its total, this reads them the other way
+            # round: a tick in between can only leave its lateness out, never count it twice
+            (starved,) = _DOUBLE.unpack_from(self._page, _SLOT * slot)
+            (last,) = _DOUBLE.unpack_from(self._page, _SLOT * slot + 8)
+            totals.append(starved + max(0.0, now - last - self.allowance_s))
+        return tuple(totals)
+
+    def since(self, mark: tuple[float, ...]) -> float:
+        """The most any core was starved since `starved_s()` returned `mark` [s]."""
+        return max(now - then for now, then in zip(self.starved_s(), mark, strict=True))
 
     def close(self) -> None:
         if self._process.poll() is None:
@@ -165,3 +210,4 @@ class Canary:
 
 
 _DOUBLE = struct.Struct("d")
+_SLOT = 16  # a core's figures: its starved total, then its last tick

@@ -426,8 +426,8 @@ class Runner:
         pressure = self._pressure  # measured while a stream is stale, to name a starved machine
         canary = self._canary  # ordinary tasks' starvation, not counted as a device's silence
         assert canary is not None  # made by run
-        # each stale stream's flag: the canary's figure when it turned stale (none: no stream is)
-        since: dict[Status, float] = {}
+        # each stale stream's flag: the canary's figures when it turned stale (none: no stream is)
+        since: dict[Status, tuple[float, ...]] = {}
         k = 0
         while n_max is None or k < n_max:
             if self.stop_requested.is_set():
@@ -469,12 +469,12 @@ class Runner:
             )
             was_stale = bool(since)
             if was_stale or cycle.verdict.status & _STALE:
-                starved = canary.starved_s()
+                mark = canary.starved_s()
                 for flag in _STALE_FLAGS:
                     if cycle.verdict.status & flag:
-                        since.setdefault(flag, starved)
+                        since.setdefault(flag, mark)
                     elif flag in since:  # the stream is back: say what was not counted
-                        self._not_counted(flag, starved - since.pop(flag), policy)
+                        self._not_counted(flag, canary.since(since.pop(flag)), policy)
             if bool(since) != was_stale:  # a pressure window per silence
                 if since:
                     pressure.start()
@@ -505,12 +505,12 @@ class Runner:
             k += 1
         return f"{seconds:g} s done", True
 
-    def _starved_since(self, since: dict[Status, float]) -> dict[Status, float] | None:
-        """For each stale stream, how long ordinary tasks were starved since it turned stale."""
+    def _starved_since(self, since: dict[Status, tuple[float, ...]]) -> dict[Status, float] | None:
+        """For each stale stream, the most ordinary tasks were starved on any core since it
+        turned stale."""
         if not since or self._canary is None:
             return None
-        starved = self._canary.starved_s()
-        return {flag: starved - at for flag, at in since.items()}
+        return {flag: self._canary.since(mark) for flag, mark in since.items()}
 
     def _not_counted(self, flag: Status, discounted: float, policy: SessionPolicy) -> None:
         """Log the starved time a stream that came back did not have counted as its silence."""
