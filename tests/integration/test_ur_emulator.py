@@ -568,3 +568,31 @@ def test_every_output_of_the_guide_is_emulated_a_register_or_refused():
     silent = set(rtde.OUTPUTS) - set(state) - registers - ur_controller.NOT_EMULATED
     assert silent == set()
     assert not (set(state) & ur_controller.NOT_EMULATED)
+
+
+def test_a_session_child_leaves_its_rtde_connections_for_its_exit_to_close(still_rig):
+    # `hw run`'s session process ends with os._exit (hoh_cosim.hardware.isolation): ur-rtde's
+    # disconnect, a fixed half-second sleep per interface, would be paid for nothing there
+    from hoh_cosim.hardware import robot as robot_module
+    from hoh_cosim.hardware.isolation import ends_without_cleanup, in_child
+
+    _, ur = still_rig
+
+    def session() -> int:
+        robot = RtdeRobot(ur.host, watchdog_hz=WATCHDOG_HZ)
+        robot.connect()
+        kept = len(robot_module._ABANDONED)
+        robot.stop()
+        robot.close()
+        return 0 if ends_without_cleanup() and len(robot_module._ABANDONED) == kept + 2 else 3
+
+    assert not ends_without_cleanup()
+    assert in_child(session) == 0
+
+    # the child's end closed both connections, and the controller saw it
+    def closed() -> int:
+        ur.said("")
+        return sum(text.startswith("rtde connection closed") for _, text in ur.events)
+
+    assert wait_for(lambda: closed() >= 2, 5.0), emulator_events(ur)
+    assert ur.said(r"^program stopped: stopped by the client")

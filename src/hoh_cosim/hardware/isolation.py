@@ -37,7 +37,7 @@ from collections.abc import Callable
 
 from hoh_cosim.errors import HohError, RunError, io_failure
 
-__all__ = ["in_child"]
+__all__ = ["ends_without_cleanup", "in_child"]
 
 _PR_SET_PDEATHSIG = 1
 _SI_KERNEL = 0x80  # si_code of a signal the kernel sent: a terminal's Ctrl-C
@@ -45,6 +45,14 @@ _FORWARDED = {signal.SIGINT, signal.SIGTERM}
 _STATUS = b"S"  # then the status in decimal
 # then the message: what the command line reports of each as it would have in this process
 _RAISED = {b"R": RunError, b"H": HohError, b"K": KeyboardInterrupt}
+_in_child = False  # this process is a child of in_child: it ends with os._exit
+
+
+def ends_without_cleanup() -> bool:
+    """Whether this process is `in_child`'s child, which ends with `os._exit` once its work is
+    done: what it leaves open (a socket, a native library's object) goes with the process, without
+    a destructor or an interpreter exit to run."""
+    return _in_child
 
 
 def in_child(work: Callable[[], int]) -> int:
@@ -92,6 +100,8 @@ def in_child(work: Callable[[], int]) -> int:
 
 
 def _child(work: Callable[[], int], report_w: int) -> None:
+    global _in_child
+    _in_child = True
     report, status = b"S1", 1
     try:
         status = work()

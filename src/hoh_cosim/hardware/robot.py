@@ -28,6 +28,7 @@ import numpy as np
 from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.vectors import Rot3, Vec, Vec3
 from hoh_cosim.errors import RunError
+from hoh_cosim.hardware.isolation import ends_without_cleanup
 
 __all__ = [
     "ROBOT_MODE_RUNNING",
@@ -178,7 +179,7 @@ def _thread_ids() -> set[int]:
         return set()
 
 
-_ABANDONED: list[Any] = []  # ur-rtde interfaces of a lost link, never destroyed (see close())
+_ABANDONED: list[Any] = []  # ur-rtde interfaces never destroyed (see RtdeRobot.close())
 
 
 RECEIVED = [
@@ -344,10 +345,13 @@ class RtdeRobot:
             control.stopScript()
 
     def close(self) -> None:
-        if self._lost:
-            # ur-rtde's own threads are reconnecting by now; a disconnect() racing them aborted the
-            # process (measured on the emulated controller), and the interfaces' destructors
-            # disconnect too: keep them alive, their sockets go with the process
+        if self._lost or ends_without_cleanup():
+            # Lost: ur-rtde's own threads are reconnecting by now; a disconnect() racing them
+            # aborted the process (measured on the emulated controller), and the interfaces'
+            # destructors disconnect too. In a process that ends with os._exit (`hw run`'s and `hw
+            # calibrate`'s session, the program already stopped): a disconnect is half a second
+            # per interface for nothing. Either way: keep them alive, their sockets go with the
+            # process.
             _ABANDONED.extend(i for i in (self._control, self._receive) if i is not None)
             self._control = self._receive = None
             return
