@@ -259,8 +259,8 @@ class KalmanBank:
             self._P = P.reshape(-1, 9)
         # Symmetric in exact arithmetic, not in floating point: each correction and prediction
         # rounds P and Pᵀ apart, and the difference walks on (1.5e-4 N², 4e-4 of P, after 3 h of
-        # 1 kHz ticks). Averaged with its transpose, P stays symmetric to the bit for any session
-        # length (the diagonal unchanged: 0.5 (a + a) = a).
+        # 1 kHz ticks). Averaged with its transpose at every correction, P is symmetric to the bit
+        # after each one, however long the session (the diagonal unchanged: 0.5 (a + a) = a).
         P = self._P
         P += P[:, _TRANSPOSED]
         P *= 0.5
