@@ -191,3 +191,61 @@ def test_a_stop_that_discounted_starved_time_is_given_that_much_longer(tmp_path)
     )
     assert run.bound_s == pytest.approx(campaign.STALE_S + 0.05 + campaign.BRAKE_S + 0.23)
     assert not [v for v in run.violations if "stood still" in v], run.violations
+
+
+def _log_with_probe_samples(path, received_s, cause):
+    """A session log, by the runner's own writer, whose cycles used FSE103 samples received at
+    these (monotonic) times, then its end with `cause`."""
+    log = SessionLog(path, {}).start()
+    count = 0
+    for k, received in enumerate(received_s):
+        log.row.start(k, 0.002 * k, False, True)
+        count += k == 0 or received != received_s[k - 1]  # a message where the count moved
+        log.row.set("/fse103.count", count)
+        log.row.set("/fse103.received_s", received)
+        log.cycle()
+    log.event(len(received_s), 0.002 * len(received_s), "end", cause)
+    log.close()
+    return path
+
+
+MACHINE_CAUSE = (
+    "FSE103 on /dev/pts/0: no new sample for 1000 ms (the stream stalled; {starved} "
+    f"{STARVED_TEXT})"
+)
+
+
+@pytest.mark.parametrize(
+    ("spike_at", "starved_ms", "still_at", "machine"),
+    [
+        (101.0, 945, 100.6, True),  # seen in a loaded suite: silent before the spike came
+        (100.4, 945, 100.6, False),  # the spike came first: the runner had to name it
+        (101.0, 700, 100.6, False),  # 300 ms counted, past the stale limit: not the cap's stop
+        (101.0, 945, 101.2, False),  # the machine's, but the arm moved on for 0.7 s
+    ],
+)
+def test_a_stream_the_machine_starved_before_any_fault_is_the_machines_stop(
+    tmp_path, spike_at, starved_ms, still_at, machine
+):
+    # the FSE103 fell silent at 100.5 (its last sample) with no fault of ours, ordinary tasks
+    # starved nearly all of that second, and the runner ended the session at its 1 s cap; the force
+    # spike injected meanwhile never reached it
+    spike = campaign.CampaignFault("force_spike", 1.5, 0.2)
+    run = campaign.Run(0, 23, (spike,), injected=[(spike, spike_at)])
+    run.returncode = 1
+    cause = MACHINE_CAUSE.format(starved=starved_ms)
+    log = _log_with_probe_samples(tmp_path / "s.mcap", [100.46, 100.48, 100.5, 100.5], cause)
+    said = f"stopping: {cause}\nsession ended: {cause}\n"
+    campaign._judge(run, said, log, _Standstill(still_at), math.nan)
+    assert run.machine_stop == (machine or still_at > 101.0)
+    if machine:
+        assert run.violations == []
+        assert run.expected == "go on"  # the spike came after: not judged
+        summary = campaign.summarise([run], 23)
+        assert summary["machine_stops"] == 1
+        assert summary["violations"] == 0
+        assert "stopped by this machine before any fault" in campaign.table(summary)
+    elif still_at > 101.0:
+        assert any("after the fse103 fell silent" in v for v in run.violations), run.violations
+    else:
+        assert any(v.startswith("the cause does not name force_spike") for v in run.violations)

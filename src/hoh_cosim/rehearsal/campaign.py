@@ -30,6 +30,17 @@ Per run the invariants (`Run.violations` names each one broken):
   its last cycle within a second of the session's end (of the kill, for runner_kill);
 - no process of the runner's session is left behind.
 
+A stream may also fall silent with no fault of ours: the machine itself starves ordinary tasks, the
+kernel worker that delivers the stream's bytes among them (a loaded machine, a virtual CPU the host
+holds back). The runner ends such a session at its cap on a stale stream's age (1 s), whatever it
+discounted, and its cause says how much of the silence was starved. Such a stop is the machine's
+(`Run.machine_stop`) when the cause says the counted silence stayed under the stale limit (the cap
+ended it), the stream's last sample came before every fault injected that could stop the session,
+silence that stream or load the machine (cpu_hog), and the arm stood still within the stale-stream zeroing (three of the stream's
+periods), the watchdog's period and `BRAKE_S` of the silence's start. The faults that came after it
+are not judged (the runner could not see them); every other invariant still is. Such runs are
+counted apart (`machine_stops`), never hidden among the faults'.
+
 The run's seed is the campaign's seed plus its number, and a run depends on its seed alone: a failing
 run is re-run alone with `--runs 1 --seed <its seed>`. The first fault's kind cycles through the kinds
 with the seed (any `len(KINDS)` runs in a row start with every kind once, so every kind is injected);
@@ -80,6 +91,8 @@ runner's 2 m/s² from the hand-guiding speed limit of 0.25 m/s takes 0.125 s, wi
 emulated controller's cycle and a busy machine."""
 
 STALE_S = 0.25  # the supervisor's default stale_stop_s (SessionPolicy)
+STALE_PERIODS = 3.0  # LimitParams.stale_periods: a stream this many periods old zeroes the command
+PERIODS_S = {"ft150": 0.005, "fse103": 0.02}  # the emulated devices' sample periods
 LINK_SILENCE_S = 0.1  # RtdeRobot.silence_s: no new controller state for this long, the link is gone
 WATCHDOG_HZ = 20.0  # the rig's robot watchdog here (hoh_cosim.hardware.config's default)
 SESSION_S = 3.5  # [s] the session after the rebias; the faults come between FIRST_S and LAST_S
@@ -214,6 +227,7 @@ class Run:
     rates_hz: dict[str, float] = field(default_factory=dict)
     gaps_s: dict[str, float] = field(default_factory=dict)
     wall_s: float = 0.0
+    machine_stop: bool = False  # stopped by a stream the machine starved, before any fault of ours
     violations: list[str] = field(default_factory=list)
 
     def row(self) -> dict[str, object]:
@@ -225,6 +239,7 @@ class Run:
             "expected": self.expected,
             "first_kind": self.first_kind,
             "stopped": int(self.stopped),
+            "machine_stop": int(self.machine_stop),
             "cause": self.cause,
             "returncode": self.returncode,
             "fault_to_standstill_ms": _ms(self.standstill_s),
@@ -545,9 +560,6 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
             return None
         return fault.stops
 
-    stopping = [(f, at) for f, at in run.injected if stops(f)]
-    maybe = [(f, at) for f, at in run.injected if stops(f) is None]
-    run.expected = "stop" if stopping else ("either" if maybe else "go on")
     match = ENDED.search(said)
     run.cause = match.group(1) if match else ""
     killed = not math.isnan(killed_at)
@@ -555,6 +567,22 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
     end = _end_event(session) if session is not None else None
     if killed:
         run.cause = end["detail"] if end else ""
+    # a stop of the machine's own: the faults that came after its silence began are not judged
+    silence = _machine_silence(run, session)
+    if silence is not None:
+        stream, silent_from = silence
+        run.machine_stop = True
+        bound_s = STALE_PERIODS * PERIODS_S[stream] + 1.0 / WATCHDOG_HZ + BRAKE_S
+        standstill_s = monitor.standstill_after(silent_from) - silent_from
+        if not standstill_s <= bound_s:
+            v.append(
+                f"the arm stood still {_ms(standstill_s) or 'never'} ms after the {stream} fell "
+                f"silent (bound {_ms(bound_s)} ms)"
+            )
+    judged = [(f, at) for f, at in run.injected if silence is None or at < silence[1]]
+    stopping = [(f, at) for f, at in judged if stops(f)]
+    maybe = [(f, at) for f, at in judged if stops(f) is None]
+    run.expected = "stop" if stopping else ("either" if maybe else "go on")
     run.stopped = killed or run.returncode == 1 or "stopping: " in said
     if run.returncode not in ((-signal.SIGKILL,) if killed else (0, 1)):
         v.append(f"the runner's exit status is {run.returncode}")
@@ -587,9 +615,13 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
                 f"(bound {_ms(run.bound_s)} ms)"
             )
     elif maybe:
-        if run.stopped and not any(re.search(KINDS[f.kind].cause, run.cause) for f, _ in maybe):
+        if (
+            run.stopped
+            and not run.machine_stop
+            and not any(re.search(KINDS[f.kind].cause, run.cause) for f, _ in maybe)
+        ):
             v.append(f"a stop whose cause names none of the faults: {run.cause!r}")
-    elif run.stopped or run.returncode != 0:
+    elif (run.stopped or run.returncode != 0) and not run.machine_stop:
         v.append(f"stopped though no fault called for it: {run.cause!r}")
     if session is None:
         return
@@ -615,6 +647,33 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
 
 
 _DISCOUNTED = re.compile(rf"(\d+) {re.escape(STARVED_TEXT)}")
+_STALE_STOP = re.compile(
+    rf"^(?P<name>{_FT}|{_PROBE}): no new sample for (?P<age>\d+) ms \(.*; "
+    rf"(?P<starved>\d+) {re.escape(STARVED_TEXT)}\)$"
+)
+
+
+def _machine_silence(run: Run, session) -> tuple[str, float] | None:
+    """(the stream, when it fell silent [monotonic s]) if the run's stop was the machine's own (see
+    the module's docstring), else None."""
+    match = _STALE_STOP.match(run.cause)
+    if match is None or session is None:
+        return None
+    # the cap ended the session: the silence it counted, less the starved time, was under the limit
+    if int(match["age"]) - int(match["starved"]) >= 1e3 * STALE_S:
+        return None
+    stream = "ft150" if re.match(_FT, match["name"]) else "fse103"
+    received = [m["received_s"] for m in session.messages.get(f"/{stream}", [])]
+    if not received:
+        return None
+    silent_from = max(received)
+    for fault, at in run.injected:
+        kind = KINDS[fault.kind]
+        silences = bool(kind.stream) and re.match(kind.stream, match["name"]) is not None
+        # our own busy processes load the machine: a silence after them is judged as usual too
+        if at <= silent_from and (silences or fault.stops is not False or kind.name == "cpu_hog"):
+            return None  # a fault of ours came first: it is judged as usual
+    return stream, silent_from
 
 
 def _discounted_s(cause: str) -> float:
@@ -696,6 +755,7 @@ def summarise(runs: Sequence[Run], seed: int) -> dict:
     return {
         "runs": len(runs),
         "violations": sum(1 for r in runs if r.violations),
+        "machine_stops": sum(1 for r in runs if r.machine_stop),
         "seed": seed,
         "kinds": per_kind,
         "fault_to_standstill_ms": _percentiles([r.standstill_s for r in runs if r.first_kind]),
@@ -752,6 +812,11 @@ def table(summary: dict) -> str:
     p = summary["fault_to_standstill_ms"]
     times = "-" if p["p50"] is None else f"{p['p50']:.0f} / {p['p99']:.0f} / {p['max']:.0f}"
     lines.append(f"{'all':16} {summary['runs']:5d} {summary['violations']:10d} {'':13}  {times}")
+    if summary["machine_stops"]:
+        lines.append(
+            f"stopped by this machine before any fault (a stream silent for the 1 s cap, most of "
+            f"it with ordinary tasks starved): {summary['machine_stops']} runs"
+        )
     for name, figures in summary["streams"].items():
         if figures["runs"]:
             lines.append(
