@@ -1,0 +1,217 @@
+"""Compiled kinematics of the UR5 and its tool frames (numba), checked against pinocchio.
+
+The plant asks, at every tick the arm moves, for the placements of the TCP and the wrist sensor, the
+TCP's twist and the classical accelerations of the tool's centre of mass and of the probe sensor;
+at every robot cycle for the TCP's Jacobian. Through pinocchio that is five calls of 1-5 µs each,
+most of it call overhead on a six-joint chain. `KernelUR5` computes all of it in one compiled call
+from the same geometry: the joint and frame placements are read from the pinocchio model
+(`UR5Model`), which stays the reference (tests compare the two to 1e-12).
+
+The chain, in the base frame B (every joint a revolute about its own z; joint i's placement
+(R_i, p_i) in its parent's frame, then Rz(q_i)):
+
+    R ← R R_i Rz(q_i) ;  o_i = o + R p_i ;  z_i = R e_z
+    v_i = v + ω × r ;  a_i = a + α × r + ω × (ω × r)          (r = o_i - o, the origin's velocity
+                                                                 and classical acceleration)
+    α ← α + z_i q̈_i + q̇_i (ω × z_i) ;  ω ← ω + z_i q̇_i
+
+and a frame fixed to the last link at (R_f, p_f) the same way with r = R p_f. The Jacobian of a
+frame's origin (LOCAL_WORLD_ALIGNED, [v; ω]) has the columns [z_i × (p_f - o_i); z_i].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from hoh_cosim.control.kernels import kernels_enabled
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["KINEMATICS_LAYOUT", "KernelUR5", "kernels_enabled"]
+
+KINEMATICS_LAYOUT = {
+    "pose_T": slice(0, 12),  # p_BT_B, then R_BT row by row
+    "pose_S": slice(12, 24),  # p_BS_B, then R_BS row by row
+    "twist_T": slice(24, 30),  # [v; ω] of the TCP in B
+    "accel_C": slice(30, 36),  # [a_C; α] of the tool's centre of mass in B
+    "accel_P": slice(36, 39),  # a of the probe sensor's origin in B
+}
+"""Where each quantity sits in `KernelUR5.tool_kinematics`'s array."""
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cross(a0, a1, a2, b0, b1, b2):  # pragma: no cover - compiled
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True, nogil=True)
+def _chain(G, nj, q, qd, qdd, with_motion, R, o, v, a, w, al, z, origins):  # pragma: no cover
+    """The last joint's frame (R, o), and with `with_motion` its origin's v, a and the link's ω, α,
+    written into the arrays given; every joint's axis z and origin into `z` and `origins`. Joint i's
+    placement is G[i]: R_i row by row, then p_i."""
+    R[:, :] = 0.0
+    R[0, 0] = R[1, 1] = R[2, 2] = 1.0
+    o[:] = 0.0
+    v[:] = 0.0
+    a[:] = 0.0
+    w[:] = 0.0
+    al[:] = 0.0
+    M = np.empty((3, 3))
+    for i in range(nj):
+        # r = R p_i : the joint's origin from the previous one
+        g = G[i]
+        r0 = R[0, 0] * g[9] + R[0, 1] * g[10] + R[0, 2] * g[11]
+        r1 = R[1, 0] * g[9] + R[1, 1] * g[10] + R[1, 2] * g[11]
+        r2 = R[2, 0] * g[9] + R[2, 1] * g[10] + R[2, 2] * g[11]
+        o[0] += r0
+        o[1] += r1
+        o[2] += r2
+        # M = R R_i
+        for m in range(3):
+            for n in range(3):
+                M[m, n] = R[m, 0] * g[n] + R[m, 1] * g[3 + n] + R[m, 2] * g[6 + n]
+        # R ← M Rz(q): columns x' = c x + s y, y' = -s x + c y, z' = z
+        c, s = np.cos(q[i]), np.sin(q[i])
+        for m in range(3):
+            R[m, 0] = c * M[m, 0] + s * M[m, 1]
+            R[m, 1] = -s * M[m, 0] + c * M[m, 1]
+            R[m, 2] = M[m, 2]
+        z0, z1, z2 = M[0, 2], M[1, 2], M[2, 2]
+        z[i, 0], z[i, 1], z[i, 2] = z0, z1, z2
+        origins[i, 0], origins[i, 1], origins[i, 2] = o[0], o[1], o[2]
+        if with_motion:
+            w0, w1, w2 = w[0], w[1], w[2]
+            c0, c1, c2 = _cross(w0, w1, w2, r0, r1, r2)  # ω × r
+            d0, d1, d2 = _cross(al[0], al[1], al[2], r0, r1, r2)  # α × r
+            e0, e1, e2 = _cross(w0, w1, w2, c0, c1, c2)  # ω × (ω × r)
+            v[0] += c0
+            v[1] += c1
+            v[2] += c2
+            a[0] += d0 + e0
+            a[1] += d1 + e1
+            a[2] += d2 + e2
+            f0, f1, f2 = _cross(w0, w1, w2, z0, z1, z2)  # ω × z
+            al[0] += z0 * qdd[i] + qd[i] * f0
+            al[1] += z1 * qdd[i] + qd[i] * f1
+            al[2] += z2 * qdd[i] + qd[i] * f2
+            w[0] += z0 * qd[i]
+            w[1] += z1 * qd[i]
+            w[2] += z2 * qd[i]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _frame(R, o, v, a, w, al, g, out, at):  # pragma: no cover - compiled
+    """A frame at g = (R_f row by row, p_f) in the last joint's frame: its pose [p; R row by row]
+    into out[at:at+12] (if at >= 0); returns its origin's (v, a) as two 3-tuples."""
+    r0 = R[0, 0] * g[9] + R[0, 1] * g[10] + R[0, 2] * g[11]
+    r1 = R[1, 0] * g[9] + R[1, 1] * g[10] + R[1, 2] * g[11]
+    r2 = R[2, 0] * g[9] + R[2, 1] * g[10] + R[2, 2] * g[11]
+    if at >= 0:
+        out[at], out[at + 1], out[at + 2] = o[0] + r0, o[1] + r1, o[2] + r2
+        for m in range(3):
+            for n in range(3):
+                out[at + 3 + 3 * m + n] = R[m, 0] * g[n] + R[m, 1] * g[3 + n] + R[m, 2] * g[6 + n]
+    w0, w1, w2 = w[0], w[1], w[2]
+    c0, c1, c2 = _cross(w0, w1, w2, r0, r1, r2)
+    d0, d1, d2 = _cross(al[0], al[1], al[2], r0, r1, r2)
+    e0, e1, e2 = _cross(w0, w1, w2, c0, c1, c2)
+    return (v[0] + c0, v[1] + c1, v[2] + c2), (a[0] + d0 + e0, a[1] + d1 + e1, a[2] + d2 + e2)
+
+
+@njit(cache=True, nogil=True)
+def _tool_kinematics(G, state):  # pragma: no cover - compiled
+    """KINEMATICS_LAYOUT's 39 values at state = [q; q̇; q̈] (3 n); G: the n joints' placements,
+    then the TCP's, the wrist sensor's, the tool's centre of mass's and the probe sensor's."""
+    R = np.empty((3, 3))
+    o, v, a, w, al = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    nj = G.shape[0] - 4
+    z, origins = np.empty((nj, 3)), np.empty((nj, 3))
+    q, qd, qdd = state[:nj], state[nj : 2 * nj], state[2 * nj : 3 * nj]
+    _chain(G, nj, q, qd, qdd, True, R, o, v, a, w, al, z, origins)
+    out = np.empty(39)
+    vT, _ = _frame(R, o, v, a, w, al, G[nj], out, 0)
+    out[24], out[25], out[26] = vT
+    out[27], out[28], out[29] = w[0], w[1], w[2]
+    _frame(R, o, v, a, w, al, G[nj + 1], out, 12)
+    _, aC = _frame(R, o, v, a, w, al, G[nj + 2], out, -1)
+    out[30], out[31], out[32] = aC
+    out[33], out[34], out[35] = al[0], al[1], al[2]
+    _, aP = _frame(R, o, v, a, w, al, G[nj + 3], out, -1)
+    out[36], out[37], out[38] = aP
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _jacobian(G, frame, q):  # pragma: no cover - compiled
+    """6 x n Jacobian of [v; ω] of frame G[frame]'s origin in B: columns [z_i × (p - o_i); z_i]."""
+    R = np.empty((3, 3))
+    o, v, a, w, al = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    nj = q.shape[0]
+    z, origins = np.empty((nj, 3)), np.empty((nj, 3))
+    _chain(G, nj, q, q, q, False, R, o, v, a, w, al, z, origins)
+    g = G[frame]
+    p0 = o[0] + (R[0, 0] * g[9] + R[0, 1] * g[10] + R[0, 2] * g[11])
+    p1 = o[1] + (R[1, 0] * g[9] + R[1, 1] * g[10] + R[1, 2] * g[11])
+    p2 = o[2] + (R[2, 0] * g[9] + R[2, 1] * g[10] + R[2, 2] * g[11])
+    J = np.empty((6, nj))
+    for i in range(nj):
+        c0, c1, c2 = _cross(
+            z[i, 0], z[i, 1], z[i, 2], p0 - origins[i, 0], p1 - origins[i, 1], p2 - origins[i, 2]
+        )
+        J[0, i], J[1, i], J[2, i] = c0, c1, c2
+        J[3, i], J[4, i], J[5, i] = z[i, 0], z[i, 1], z[i, 2]
+    return J
+
+
+class KernelUR5:
+    """The kinematics a `UR5Model` gives the plant, compiled, from that model's own placements.
+
+    `tool_kinematics(q, q̇, q̈)`: one new array laid out as `KINEMATICS_LAYOUT`;
+    `jacobian(q, frame)`: as `UR5Model.jacobian`, for the frames the model has.
+    """
+
+    TOOL_FRAMES = ("tcp", "ft_sensor", "tool_com", "probe_sensor")
+
+    def __init__(self, model: object) -> None:
+        pin_model = model.model  # type: ignore[attr-defined]
+        self.frame_ids = dict(model.frame_ids)  # type: ignore[attr-defined]
+        joints = range(1, pin_model.njoints)
+        for j in joints:
+            if pin_model.joints[j].shortname() != "JointModelRZ" or pin_model.parents[j] != j - 1:
+                raise ConfigError("KernelUR5: expected a chain of revolute joints about z")
+        placements = [pin_model.jointPlacements[j] for j in joints]
+        last = pin_model.njoints - 1
+        frames = {}
+        for name, fid in self.frame_ids.items():
+            frame = pin_model.frames[fid]
+            if frame.parentJoint != last:
+                raise ConfigError(f"KernelUR5: frame {name} is not fixed to the last link")
+            frames[name] = frame.placement
+        # absent tool frames (a bare arm) read as the flange; then every other frame, by name
+        tool = [frames.get(name, frames["flange"]) for name in self.TOOL_FRAMES]
+        self._rows = {name: len(placements) + 4 + i for i, name in enumerate(frames)}
+        self._G = np.array(
+            [
+                np.concatenate([np.asarray(M.rotation).ravel(), np.asarray(M.translation)])
+                for M in (*placements, *tool, *frames.values())
+            ]
+        )
+        self._nj = len(placements)
+        self._G_tool = self._G[: self._nj + 4].copy()
+        self.nq = pin_model.nq
+
+    def tool_kinematics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        return self.tool_kinematics_at(np.concatenate([q, qd, qdd]))
+
+    def tool_kinematics_at(self, state: np.ndarray) -> np.ndarray:
+        """`tool_kinematics` of the arm's state [q; q̇; q̈] as one array (`SpeedLArm.state`)."""
+        return _tool_kinematics(self._G_tool, state)
+
+    def jacobian(self, q: np.ndarray, frame: str) -> np.ndarray:
+        return _jacobian(self._G, self._rows[frame], np.asarray(q, dtype=np.float64))
+
+    def warm_up(self) -> None:
+        """Load (or compile) the kernels now, so that no tick waits for it."""
+        zero = np.zeros(self.nq)
+        self.tool_kinematics(zero, zero, zero)
+        self.jacobian(zero, "flange")
