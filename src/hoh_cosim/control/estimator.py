@@ -416,6 +416,11 @@ class Estimator:
         self._reset_mismatch()
         self._update_ready()
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if self._kernel:  # a copy's rows in S are its own bank's again (a view, not a copy)
+            self._in_S = self._filters.in_S
+
     def _reset_mismatch(self) -> None:
         """The consistency check starts again: its mismatch, and the output that holds it, are 0."""
         self._consistency.reset()

@@ -172,13 +172,8 @@ class KernelKalmanBank:
         self.n = n = 3 * len(self.channels)
         self._q = np.concatenate([c.q for c in self.channels])
         self._P0 = np.array([np.diag(c.p0) for c in self.channels for _ in range(3)])
-        self.layout = layout = _state_layout(n)
-        self.state = np.zeros(layout["consistency"].stop)
-        self.x = self.state[layout["x"]].reshape(n, 3)  # views: written in place
-        self._P = self.state[layout["P"]].reshape(n, 3, 3)
-        self.z = self.state[layout["z"]]
-        self.in_S = self.state[layout["in_S"]].reshape(4, 3)
-        self.consistency_state = self.state[layout["consistency"]]
+        self.state = np.zeros(_state_layout(n)["consistency"].stop)
+        self._views()
         r = np.concatenate([c.r for c in self.channels])
         # n | F | r | R_SP | consistency | Q
         self.constants = np.zeros(27 + n + 9 * n)
@@ -186,6 +181,26 @@ class KernelKalmanBank:
         self.constants[10 : 10 + n] = r
         self._dt = math.nan
         self.reset()
+
+    def _views(self) -> None:
+        """The parts of `state`, as views written in place."""
+        n, layout = self.n, _state_layout(self.n)
+        self.x = self.state[layout["x"]].reshape(n, 3)
+        self._P = self.state[layout["P"]].reshape(n, 3, 3)
+        self.z = self.state[layout["z"]]
+        self.in_S = self.state[layout["in_S"]].reshape(4, 3)
+        self.consistency_state = self.state[layout["consistency"]]
+
+    # A copy (pickle, deepcopy: an FMU's state) would turn the views into arrays of their own:
+    # copies are made without them, and they are made anew.
+    _VIEWS = ("x", "_P", "z", "in_S", "consistency_state")
+
+    def __getstate__(self) -> dict[str, object]:
+        return {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self._views()
 
     def reset(self) -> None:
         self.x[...] = 0.0  # per axis: force, rate, acceleration
@@ -256,14 +271,20 @@ class KernelConsistency:
                 params.mismatch_time_constant_s,  # type: ignore[attr-defined]
             ]
         )
-        self.state = np.zeros(6)
+        self._own = np.zeros(6)
+        self._bank: KernelKalmanBank | None = None
         self.reset()
 
     def attach(self, bank: KernelKalmanBank) -> None:
         """Keep the state in `bank`'s state array, where `estimator_tick` updates it."""
         bank.set_consistency(self.constants)
-        bank.consistency_state[...] = self.state
-        self.state = bank.consistency_state
+        bank.consistency_state[...] = self._own
+        self._bank = bank
+
+    @property
+    def state(self) -> Vec:
+        """mismatch_S (3), the time of the last step, 1 once there was one, |mismatch_S|."""
+        return self._own if self._bank is None else self._bank.consistency_state
 
     def reset(self) -> None:
         self.state[...] = 0.0
