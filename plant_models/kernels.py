@@ -213,5 +213,232 @@ class KernelUR5:
     def warm_up(self) -> None:
         """Load (or compile) the kernels now, so that no tick waits for it."""
         zero = np.zeros(self.nq)
-        self.tool_kinematics(zero, zero, zero)
+        k = self.tool_kinematics(zero, zero, zero)
         self.jacobian(zero, "flange")
+        three = np.zeros(3)
+        _loads(np.zeros(35), k, three, three, three)
+        if self.nq == 6:
+            _arm_cycle(
+                self._G,
+                self._rows["flange"],
+                k[:18] * 0.0,
+                *(np.zeros(6),) * 2,
+                np.zeros(39),
+                np.ones(8),
+            )
+
+
+# --- what the ideal sensors read (tool.ToolLoads.readings) --------------------------------------
+
+
+def loads_constants(tool: object, g_B: np.ndarray) -> np.ndarray:
+    """`_loads`'s constants from a `ToolModel` and gravity: m, g_B, p_SH, p_ST, p_SC, the
+    diagonal inertia, R_PS row by row, whether the cable pulls, p_SK, its anchor, its tension, its
+    hanging weight, the probe's mass (35 values)."""
+    cable = tool.cable  # type: ignore[attr-defined]
+    return np.array(
+        [
+            tool.mass_kg,  # type: ignore[attr-defined]
+            *np.asarray(g_B, dtype=np.float64).tolist(),
+            *tool.p_SH_S.tolist(),  # type: ignore[attr-defined]
+            *tool.p_ST_S.tolist(),  # type: ignore[attr-defined]
+            *tool.p_SC_S.tolist(),  # type: ignore[attr-defined]
+            *tool.inertia_C_S.tolist(),  # type: ignore[attr-defined]
+            *tool.R_SP.T.ravel().tolist(),  # type: ignore[attr-defined]
+            1.0 if cable.enabled else 0.0,
+            *cable.p_SK_S.tolist(),
+            *cable.anchor_B.tolist(),
+            cable.tension_N,
+            cable.hanging_weight_N,
+            tool.probe_mass_kg,  # type: ignore[attr-defined]
+        ]
+    )
+
+
+@njit(cache=True, nogil=True)
+def _loads(C, k, F_hand, tau_hand, F_contact):  # pragma: no cover - compiled
+    """(wrench of the tool on the wrist sensor in S, force of the probe on the probe sensor in P)
+    as one (9,) array, from the kinematics `k` (KINEMATICS_LAYOUT) and the loads in B:
+
+        f = F_hand + F_contact + F_cable + m (g - a_C)
+        τ_S = τ_hand + p_SH × F_hand + p_ST × F_contact + p_SK × F_cable + p_SC × m (g - a_C)
+              - (I α + ω × I ω)                     (in S, I diagonal; every vector turned into S)
+        F_P = R_PS (F_contact + m_P (g - a_P))     (in S, then P)
+    """
+    m = C[0]
+    g0, g1, g2 = C[1], C[2], C[3]
+    R = k[15:24]  # R_BS row by row: v_S = R_BSᵀ v_B, v_S[j] = Σᵢ R[3 i + j] v_B[i]
+    rows_B = np.empty((6, 3))
+    for i in range(3):
+        rows_B[0, i] = F_hand[i]
+        rows_B[1, i] = F_contact[i]
+        rows_B[2, i] = m * (C[1 + i] - k[30 + i])
+        rows_B[3, i] = tau_hand[i]
+        rows_B[4, i] = k[27 + i]  # ω
+        rows_B[5, i] = k[33 + i]  # α
+    S = np.empty((6, 3))
+    for r in range(6):
+        for j in range(3):
+            S[r, j] = rows_B[r, 0] * R[j] + rows_B[r, 1] * R[3 + j] + rows_B[r, 2] * R[6 + j]
+    f0 = S[0, 0] + S[1, 0] + S[2, 0]
+    f1 = S[0, 1] + S[1, 1] + S[2, 1]
+    f2 = S[0, 2] + S[1, 2] + S[2, 2]
+    r0 = r1 = r2 = 0.0
+    for a in range(3):  # p_SH × F_hand + p_ST × F_contact + p_SC × m (g - a_C)
+        p0, p1, p2 = C[4 + 3 * a], C[5 + 3 * a], C[6 + 3 * a]
+        c0, c1, c2 = _cross(p0, p1, p2, S[a, 0], S[a, 1], S[a, 2])
+        r0 += c0
+        r1 += c1
+        r2 += c2
+    ix, iy, iz = C[13], C[14], C[15]
+    wx, wy, wz = S[4, 0], S[4, 1], S[4, 2]
+    ax, ay, az = S[5, 0], S[5, 1], S[5, 2]
+    tau0 = S[3, 0] + r0 - (ix * ax + (iz - iy) * wy * wz)
+    tau1 = S[3, 1] + r1 - (iy * ay + (ix - iz) * wz * wx)
+    tau2 = S[3, 2] + r2 - (iz * az + (iy - ix) * wx * wy)
+    if C[25] != 0.0:  # the cable, from K = p_BS + R_BS p_SK to its anchor, plus its weight
+        s0, s1, s2 = C[26], C[27], C[28]
+        K0 = k[12] + (R[0] * s0 + R[1] * s1 + R[2] * s2)
+        K1 = k[13] + (R[3] * s0 + R[4] * s1 + R[5] * s2)
+        K2 = k[14] + (R[6] * s0 + R[7] * s1 + R[8] * s2)
+        d0, d1, d2 = C[29] - K0, C[30] - K1, C[31] - K2
+        n = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if n > 0.0:
+            s = C[32] / n
+            d0, d1, d2 = d0 * s, d1 * s, d2 * s
+        else:
+            d0 = d1 = d2 = 0.0
+        h = C[33] / np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        b0, b1, b2 = d0 + g0 * h, d1 + g1 * h, d2 + g2 * h
+        k0 = R[0] * b0 + R[3] * b1 + R[6] * b2
+        k1 = R[1] * b0 + R[4] * b1 + R[7] * b2
+        k2 = R[2] * b0 + R[5] * b1 + R[8] * b2
+        f0, f1, f2 = f0 + k0, f1 + k1, f2 + k2
+        c0, c1, c2 = _cross(s0, s1, s2, k0, k1, k2)
+        tau0, tau1, tau2 = tau0 + c0, tau1 + c1, tau2 + c2
+    out = np.empty(9)
+    out[0], out[1], out[2], out[3], out[4], out[5] = f0, f1, f2, tau0, tau1, tau2
+    P0, P1, P2 = S[1, 0], S[1, 1], S[1, 2]
+    mp = C[34]
+    if mp > 0.0:
+        b0, b1, b2 = mp * (g0 - k[36]), mp * (g1 - k[37]), mp * (g2 - k[38])
+        P0 = P0 + (R[0] * b0 + R[3] * b1 + R[6] * b2)
+        P1 = P1 + (R[1] * b0 + R[4] * b1 + R[7] * b2)
+        P2 = P2 + (R[2] * b0 + R[5] * b1 + R[8] * b2)
+    for i in range(3):
+        out[6 + i] = C[16 + 3 * i] * P0 + C[17 + 3 * i] * P1 + C[18 + 3 * i] * P2
+    return out
+
+
+def tool_loads(
+    constants: np.ndarray,
+    kinematics: np.ndarray,
+    F_hand_B: np.ndarray,
+    tau_hand_B: np.ndarray,
+    F_contact_B: np.ndarray,
+) -> np.ndarray:
+    """`ToolLoads.readings` compiled: [wrench_S; force_P], a new (9,) array (see `_loads`)."""
+    return _loads(constants, kinematics, F_hand_B, tau_hand_B, F_contact_B)
+
+
+# --- a robot cycle of the arm under speedL (arm.SpeedLArm.cycle) --------------------------------
+
+
+@njit(cache=True, nogil=True)
+def _arm_cycle(G, frame, state, active, robot_twist, svd, P):  # pragma: no cover - compiled
+    """One robot cycle's arithmetic: the tracked twist moved towards the active command (at most
+    a·T, a_rot·T), the joint velocities by damped least squares (the SVD skipped when Weyl's bound
+    from the last one, kept in `svd` = [J₀ (36), σ_min, σ_max, 1 once taken], already shows
+    σ_min ≥ ε), the speed and position limits, and q̈ over the ramp. Returns [twist (6); q̈ (6)].
+    P = [a·T, a_rot·T, ε, λ_max, joint speed limit, position limit, T, Weyl margin]."""
+    nj = 6
+    out = np.empty(12)
+    # _step_towards
+    dv0, dv1, dv2 = (
+        active[0] - robot_twist[0],
+        active[1] - robot_twist[1],
+        active[2] - robot_twist[2],
+    )
+    dw0, dw1, dw2 = (
+        active[3] - robot_twist[3],
+        active[4] - robot_twist[4],
+        active[5] - robot_twist[5],
+    )
+    n_v = np.sqrt(dv0 * dv0 + dv1 * dv1 + dv2 * dv2)
+    n_w = np.sqrt(dw0 * dw0 + dw1 * dw1 + dw2 * dw2)
+    for i in range(6):
+        out[i] = active[i]
+    if not (n_v <= P[0] and n_w <= P[1]):
+        if not n_v <= P[0]:
+            s = P[0] / n_v
+            out[0], out[1], out[2] = (
+                robot_twist[0] + dv0 * s,
+                robot_twist[1] + dv1 * s,
+                robot_twist[2] + dv2 * s,
+            )
+        if not n_w <= P[1]:
+            s = P[1] / n_w
+            out[3], out[4], out[5] = (
+                robot_twist[3] + dw0 * s,
+                robot_twist[4] + dw1 * s,
+                robot_twist[5] + dw2 * s,
+            )
+    twist = out[:6].copy()
+    q = state[:nj]
+    J = _jacobian(G, frame, q)
+    threshold, max_damping = P[2], P[3]
+    sigma_min = -1.0
+    if svd[38] != 0.0:
+        total = 0.0
+        for i in range(6):
+            for j in range(6):
+                d = J[i, j] - svd[6 * i + j]
+                total += d * d
+        bound = svd[36] - np.sqrt(total)
+        if bound >= threshold + P[7] * svd[37]:
+            sigma_min = bound
+    if sigma_min < 0.0:
+        sigma = np.linalg.svd(J)[1]
+        for i in range(6):
+            for j in range(6):
+                svd[6 * i + j] = J[i, j]
+        svd[36], svd[37], svd[38] = sigma[-1], sigma[0], 1.0
+        sigma_min = sigma[-1]
+    if sigma_min >= threshold:
+        qd = np.linalg.solve(J, twist)
+    else:
+        lam2 = (1.0 - (sigma_min / threshold) ** 2) * max_damping**2
+        A = J @ J.T
+        for i in range(6):
+            A[i, i] += lam2
+        qd = J.T @ np.linalg.solve(A, twist)
+    peak = 0.0
+    nan = False
+    for i in range(nj):
+        if np.isnan(qd[i]):
+            nan = True
+        peak = max(peak, abs(qd[i]))
+    if not nan and peak > P[4]:
+        s = P[4] / peak
+        for i in range(nj):
+            qd[i] = qd[i] * s
+    T, lim = P[6], P[5]
+    for i in range(nj):
+        q_end = q[i] + 0.5 * (state[nj + i] + qd[i]) * T
+        if (q_end > lim and qd[i] > 0.0) or (q_end < -lim and qd[i] < 0.0):
+            qd[i] = 0.0
+        out[6 + i] = (qd[i] - state[nj + i]) / T
+    return out
+
+
+def arm_cycle(
+    model: KernelUR5,
+    frame: str,
+    state: np.ndarray,
+    active: np.ndarray,
+    robot_twist: np.ndarray,
+    svd: np.ndarray,
+    constants: np.ndarray,
+) -> np.ndarray:
+    """`SpeedLArm.cycle`'s arithmetic compiled (see `_arm_cycle`); [twist (6); q̈ (6)], new."""
+    return _arm_cycle(model._G, model._rows[frame], state, active, robot_twist, svd, constants)
