@@ -24,7 +24,7 @@ import numpy as np
 
 from hoh_cosim.control.vectors import Vec, as_scalar, as_vector, frozen
 from hoh_cosim.errors import ConfigError
-from plant_models.kernels import KernelUR5, arm_cycle
+from plant_models.kernels import KernelUR5, arm_advance, arm_cycle
 from plant_models.ur5 import JOINT_POSITION_LIMIT, JOINT_SPEED_LIMIT, UR5Model
 
 __all__ = ["HOME_Q", "ArmParams", "SpeedLArm", "damped_least_squares"]
@@ -249,6 +249,14 @@ class SpeedLArm:
         """Integrate over dt: the cycle's constant joint acceleration until its ramp ends, then
         constant velocity (exact either way)."""
         ramp = min(dt, self._ramp_left)
+        if self._compiled is not None:  # the same, on the state array (the lists are not kept)
+            self.state = state = arm_advance(self.state, self.qdd, ramp, dt)
+            self.q, self.qd, self.qdd_mean = state[:6], state[6:12], state[12:]
+            self._ramp_left -= ramp
+            if self._ramp_left <= 0.0:
+                self._qdd = [0.0] * 6
+                self.qdd = np.zeros(6)
+            return
         c = 0.5 * ramp * ramp + ramp * (dt - ramp)
         q, qd, qdd = self._q, self._qd, self._qdd
         self._q = [q[i] + qd[i] * dt + qdd[i] * c for i in _JOINTS]

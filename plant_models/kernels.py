@@ -119,16 +119,17 @@ def _frame(R, o, v, a, w, al, g, out, at):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _tool_kinematics(G, state):  # pragma: no cover - compiled
-    """KINEMATICS_LAYOUT's 39 values at state = [q; q̇; q̈] (3 n); G: the n joints' placements,
-    then the TCP's, the wrist sensor's, the tool's centre of mass's and the probe sensor's."""
+def _tool_kinematics(G, state, out):  # pragma: no cover - compiled
+    """KINEMATICS_LAYOUT's 39 values at state = [q; q̇; q̈] (3 n) into `out`; G: the n joints'
+    placements, then the TCP's, the wrist sensor's, the tool's centre of mass's and the probe
+    sensor's. (The callers make `out`: a compiled function's own new array costs twice as much to
+    return.)"""
     R = np.empty((3, 3))
     o, v, a, w, al = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     nj = G.shape[0] - 4
     z, origins = np.empty((nj, 3)), np.empty((nj, 3))
     q, qd, qdd = state[:nj], state[nj : 2 * nj], state[2 * nj : 3 * nj]
     _chain(G, nj, q, qd, qdd, True, R, o, v, a, w, al, z, origins)
-    out = np.empty(39)
     vT, _ = _frame(R, o, v, a, w, al, G[nj], out, 0)
     out[24], out[25], out[26] = vT
     out[27], out[28], out[29] = w[0], w[1], w[2]
@@ -138,11 +139,10 @@ def _tool_kinematics(G, state):  # pragma: no cover - compiled
     out[33], out[34], out[35] = al[0], al[1], al[2]
     _, aP = _frame(R, o, v, a, w, al, G[nj + 3], out, -1)
     out[36], out[37], out[38] = aP
-    return out
 
 
 @njit(cache=True, nogil=True)
-def _jacobian(G, frame, q):  # pragma: no cover - compiled
+def _jacobian(G, frame, q, J):  # pragma: no cover - compiled
     """6 x n Jacobian of [v; ω] of frame G[frame]'s origin in B: columns [z_i × (p - o_i); z_i]."""
     R = np.empty((3, 3))
     o, v, a, w, al = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
@@ -153,14 +153,12 @@ def _jacobian(G, frame, q):  # pragma: no cover - compiled
     p0 = o[0] + (R[0, 0] * g[9] + R[0, 1] * g[10] + R[0, 2] * g[11])
     p1 = o[1] + (R[1, 0] * g[9] + R[1, 1] * g[10] + R[1, 2] * g[11])
     p2 = o[2] + (R[2, 0] * g[9] + R[2, 1] * g[10] + R[2, 2] * g[11])
-    J = np.empty((6, nj))
     for i in range(nj):
         c0, c1, c2 = _cross(
             z[i, 0], z[i, 1], z[i, 2], p0 - origins[i, 0], p1 - origins[i, 1], p2 - origins[i, 2]
         )
         J[0, i], J[1, i], J[2, i] = c0, c1, c2
         J[3, i], J[4, i], J[5, i] = z[i, 0], z[i, 1], z[i, 2]
-    return J
 
 
 class KernelUR5:
@@ -205,27 +203,24 @@ class KernelUR5:
 
     def tool_kinematics_at(self, state: np.ndarray) -> np.ndarray:
         """`tool_kinematics` of the arm's state [q; q̇; q̈] as one array (`SpeedLArm.state`)."""
-        return _tool_kinematics(self._G_tool, state)
+        out = np.empty(39)
+        _tool_kinematics(self._G_tool, state, out)
+        return out
 
     def jacobian(self, q: np.ndarray, frame: str) -> np.ndarray:
-        return _jacobian(self._G, self._rows[frame], np.asarray(q, dtype=np.float64))
+        J = np.empty((6, self.nq))
+        _jacobian(self._G, self._rows[frame], np.asarray(q, dtype=np.float64), J)
+        return J
 
     def warm_up(self) -> None:
         """Load (or compile) the kernels now, so that no tick waits for it."""
         zero = np.zeros(self.nq)
         k = self.tool_kinematics(zero, zero, zero)
         self.jacobian(zero, "flange")
-        three = np.zeros(3)
-        _loads(np.zeros(35), k, three, three, three)
+        tool_loads(np.zeros(35), k, *(np.zeros(3),) * 3)
         if self.nq == 6:
-            _arm_cycle(
-                self._G,
-                self._rows["flange"],
-                k[:18] * 0.0,
-                *(np.zeros(6),) * 2,
-                np.zeros(39),
-                np.ones(8),
-            )
+            arm_cycle(self, "flange", np.zeros(18), *(np.zeros(6),) * 2, np.zeros(39), np.ones(8))
+            arm_advance(np.zeros(18), np.zeros(6), 1e-3, 1e-3)
 
 
 # --- what the ideal sensors read (tool.ToolLoads.readings) --------------------------------------
@@ -256,9 +251,9 @@ def loads_constants(tool: object, g_B: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _loads(C, k, F_hand, tau_hand, F_contact):  # pragma: no cover - compiled
+def _loads(C, k, F_hand, tau_hand, F_contact, out):  # pragma: no cover - compiled
     """(wrench of the tool on the wrist sensor in S, force of the probe on the probe sensor in P)
-    as one (9,) array, from the kinematics `k` (KINEMATICS_LAYOUT) and the loads in B:
+    into `out` (9,), from the kinematics `k` (KINEMATICS_LAYOUT) and the loads in B:
 
         f = F_hand + F_contact + F_cable + m (g - a_C)
         τ_S = τ_hand + p_SH × F_hand + p_ST × F_contact + p_SK × F_cable + p_SC × m (g - a_C)
@@ -316,7 +311,6 @@ def _loads(C, k, F_hand, tau_hand, F_contact):  # pragma: no cover - compiled
         f0, f1, f2 = f0 + k0, f1 + k1, f2 + k2
         c0, c1, c2 = _cross(s0, s1, s2, k0, k1, k2)
         tau0, tau1, tau2 = tau0 + c0, tau1 + c1, tau2 + c2
-    out = np.empty(9)
     out[0], out[1], out[2], out[3], out[4], out[5] = f0, f1, f2, tau0, tau1, tau2
     P0, P1, P2 = S[1, 0], S[1, 1], S[1, 2]
     mp = C[34]
@@ -327,7 +321,6 @@ def _loads(C, k, F_hand, tau_hand, F_contact):  # pragma: no cover - compiled
         P2 = P2 + (R[2] * b0 + R[5] * b1 + R[8] * b2)
     for i in range(3):
         out[6 + i] = C[16 + 3 * i] * P0 + C[17 + 3 * i] * P1 + C[18 + 3 * i] * P2
-    return out
 
 
 def tool_loads(
@@ -338,21 +331,22 @@ def tool_loads(
     F_contact_B: np.ndarray,
 ) -> np.ndarray:
     """`ToolLoads.readings` compiled: [wrench_S; force_P], a new (9,) array (see `_loads`)."""
-    return _loads(constants, kinematics, F_hand_B, tau_hand_B, F_contact_B)
+    out = np.empty(9)
+    _loads(constants, kinematics, F_hand_B, tau_hand_B, F_contact_B, out)
+    return out
 
 
 # --- a robot cycle of the arm under speedL (arm.SpeedLArm.cycle) --------------------------------
 
 
 @njit(cache=True, nogil=True)
-def _arm_cycle(G, frame, state, active, robot_twist, svd, P):  # pragma: no cover - compiled
+def _arm_cycle(G, frame, state, active, robot_twist, svd, P, out):  # pragma: no cover
     """One robot cycle's arithmetic: the tracked twist moved towards the active command (at most
     a·T, a_rot·T), the joint velocities by damped least squares (the SVD skipped when Weyl's bound
     from the last one, kept in `svd` = [J₀ (36), σ_min, σ_max, 1 once taken], already shows
-    σ_min ≥ ε), the speed and position limits, and q̈ over the ramp. Returns [twist (6); q̈ (6)].
+    σ_min ≥ ε), the speed and position limits, and q̈ over the ramp, into out = [twist; q̈] (12).
     P = [a·T, a_rot·T, ε, λ_max, joint speed limit, position limit, T, Weyl margin]."""
     nj = 6
-    out = np.empty(12)
     # _step_towards
     dv0, dv1, dv2 = (
         active[0] - robot_twist[0],
@@ -385,7 +379,8 @@ def _arm_cycle(G, frame, state, active, robot_twist, svd, P):  # pragma: no cove
             )
     twist = out[:6].copy()
     q = state[:nj]
-    J = _jacobian(G, frame, q)
+    J = np.empty((6, nj))
+    _jacobian(G, frame, q, J)
     threshold, max_damping = P[2], P[3]
     sigma_min = -1.0
     if svd[38] != 0.0:
@@ -428,7 +423,6 @@ def _arm_cycle(G, frame, state, active, robot_twist, svd, P):  # pragma: no cove
         if (q_end > lim and qd[i] > 0.0) or (q_end < -lim and qd[i] < 0.0):
             qd[i] = 0.0
         out[6 + i] = (qd[i] - state[nj + i]) / T
-    return out
 
 
 def arm_cycle(
@@ -441,4 +435,25 @@ def arm_cycle(
     constants: np.ndarray,
 ) -> np.ndarray:
     """`SpeedLArm.cycle`'s arithmetic compiled (see `_arm_cycle`); [twist (6); q̈ (6)], new."""
-    return _arm_cycle(model._G, model._rows[frame], state, active, robot_twist, svd, constants)
+    out = np.empty(12)
+    _arm_cycle(model._G, model._rows[frame], state, active, robot_twist, svd, constants, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _advance(state, qdd, ramp, dt, out):  # pragma: no cover - compiled
+    """`SpeedLArm.advance` over dt with the cycle's q̈ for `ramp` of it, into out = [q; q̇; q̈_mean]:
+    q ← q + q̇ dt + q̈ (ramp²/2 + ramp (dt - ramp)) ;  q̇ ← q̇ + q̈ ramp ;  q̈_mean = q̈ ramp / dt."""
+    c = 0.5 * ramp * ramp + ramp * (dt - ramp)
+    k = ramp / dt
+    for i in range(6):
+        out[i] = state[i] + state[6 + i] * dt + qdd[i] * c
+        out[6 + i] = state[6 + i] + qdd[i] * ramp
+        out[12 + i] = qdd[i] if ramp == dt else qdd[i] * k
+
+
+def arm_advance(state: np.ndarray, qdd: np.ndarray, ramp: float, dt: float) -> np.ndarray:
+    """`_advance` into a new array."""
+    out = np.empty(18)
+    _advance(state, qdd, ramp, dt, out)
+    return out

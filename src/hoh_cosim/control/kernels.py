@@ -341,11 +341,12 @@ def _consistency(state, c, t, rows):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _estimator_tick(S, C, R_BS, t, code):  # pragma: no cover - compiled
+def _estimator_tick(S, C, R_BS, t, code, in_B):  # pragma: no cover - compiled
     """The bank's tick (`_predict_correct`: axes lo..hi-1 corrected, code = lo + 16 hi + 256 check),
     the filtered forces into in_S (rows F_hand, τ_hand, F_probe = R_SP F_P, in S; the fourth row,
     the held measurement, is the caller's), the consistency check if asked, and the four rows turned
-    into B: row_B = row_S R_BSᵀ (R_BS row by row, 9 values); a new (4, 3) array."""
+    into B: row_B = row_S R_BSᵀ (R_BS row by row, 9 values), written into `in_B` (4, 3): a new
+    array made by the caller (a compiled function's own new array costs twice as much to return)."""
     lo, hi, check = code % 16, (code // 16) % 16, code >= 256
     _predict_correct(S, C, lo, hi)
     n = int(C[0])
@@ -359,12 +360,10 @@ def _estimator_tick(S, C, R_BS, t, code):  # pragma: no cover - compiled
         S[at + 6 + i] = R_SP[3 * i] * f0 + R_SP[3 * i + 1] * f1 + R_SP[3 * i + 2] * f2
     if check:
         _consistency_at(S[at + 12 : at + 18], C[19 + n : 27 + n], t, S[at : at + 9])
-    in_B = np.empty((4, 3))
     for k in range(4):
         s0, s1, s2 = S[at + 3 * k], S[at + 3 * k + 1], S[at + 3 * k + 2]
         for i in range(3):
             in_B[k, i] = R_BS[3 * i] * s0 + R_BS[3 * i + 1] * s1 + R_BS[3 * i + 2] * s2
-    return in_B
 
 
 def estimator_tick(
@@ -390,7 +389,9 @@ def estimator_tick(
         bank.z[6:9] = probe_z
         lo, hi = min(lo, 6), 9
     code = lo + 16 * hi
-    return _estimator_tick(bank.state, bank.constants, R_BS, t, code + 256 * check)
+    in_B = np.empty((4, 3))
+    _estimator_tick(bank.state, bank.constants, R_BS, t, code + 256 * check, in_B)
+    return in_B
 
 
 _warm = False
