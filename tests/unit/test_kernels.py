@@ -138,6 +138,8 @@ CONFIGURATIONS = {
         "probe_correction": ProbeCorrectionParams(kind="online", check_s=0.3),
         "tool": ToolParams(0.5, [-0.01, 0.0, -0.07]),
     },
+    "butterworth": {"filter": "butterworth"},
+    "one_euro": {"filter": "one_euro"},
     "given_bias": {
         "ft_rebias_packets": 0,
         "probe_rebias_packets": 0,
@@ -156,7 +158,10 @@ def test_estimator_matches_the_pure_estimator(config, dt):
         **{"ft_rebias_packets": 20, "probe_rebias_packets": 10, **CONFIGURATIONS[config]}
     )
     pure, compiled = _pure_and_compiled(lambda: Estimator(params))
-    assert compiled._kernel
+    if params.filter == "kalman":
+        assert compiled._kernel
+    else:
+        assert all(type(f).__name__.startswith("Kernel") for f in compiled._filters.filters)
     stream = _stream(seed=7)
     stream.dt = dt
     agree = Agreement()

@@ -35,14 +35,18 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 from numba import njit
 
+from hoh_cosim.control.baselines import ButterworthFilter, OneEuroFilter
 from hoh_cosim.control.kalman import KalmanParams, axis_transition, process_noise
 from hoh_cosim.control.vectors import Vec, Vec3
 from hoh_cosim.errors import ConfigError
 
 __all__ = [
     "KERNEL_MODES",
+    "KernelButterworth",
     "KernelConsistency",
     "KernelKalmanBank",
+    "KernelOneEuro",
+    "compiled_filter",
     "estimator_tick",
     "kernels_enabled",
     "use_kernels",
@@ -394,6 +398,103 @@ def estimator_tick(
     return in_B
 
 
+# --- the baseline filters (baselines.ButterworthFilter, baselines.OneEuroFilter) ----------------
+
+
+@njit(cache=True, nogil=True)
+def _butterworth(sections, zi, held, out):  # pragma: no cover - compiled
+    """One sample of every axis through the second-order sections (b0, b1, b2, a1, a2), transposed
+    direct form II as scipy's `sosfilt`, the same operations in the same order:
+    y = b0 x + s0 ;  s0 ← b1 x - a1 y + s1 ;  s1 ← b2 x - a2 y ;  x ← y   (each section)"""
+    for a in range(held.shape[0]):
+        x = held[a]
+        for k in range(sections.shape[0]):
+            y = sections[k, 0] * x + zi[a, k, 0]
+            zi[a, k, 0] = sections[k, 1] * x - sections[k, 3] * y + zi[a, k, 1]
+            zi[a, k, 1] = sections[k, 2] * x - sections[k, 4] * y
+            x = y
+        out[a] = x
+
+
+class KernelButterworth(ButterworthFilter):
+    """`ButterworthFilter` with its per-sample sections compiled: the same design (scipy's), the
+    same state, the same numbers."""
+
+    def reset(self) -> None:
+        super().reset()
+        self._held_a: Vec | None = None
+        self._zi_a: Vec | None = None
+
+    def _design(self, dt: float) -> None:
+        super()._design(dt)
+        self._sections_a = np.array(self._sections, dtype=np.float64)
+
+    def step(self, dt: float, z: Vec | None) -> Vec:
+        if dt != self._dt:
+            if not math.isnan(self._dt):
+                raise ConfigError(f"dt: the filter was designed for {self._dt} s, got {dt} s")
+            self._design(dt)
+        if z is not None:
+            self._held_a = np.array(z, dtype=np.float64)
+            if self._zi_a is None:  # the steady state for the first packet, per axis and section
+                unit = np.array(self._zi_unit, dtype=np.float64)
+                self._zi_a = self._held_a[:, np.newaxis, np.newaxis] * unit[np.newaxis, :, :]
+        if self._held_a is None:
+            return np.zeros(self.size)
+        out = np.empty(self.size)
+        _butterworth(self._sections_a, self._zi_a, self._held_a, out)
+        return out
+
+
+@njit(cache=True, nogil=True)
+def _one_euro(x_hat, dx_hat, z, rate, c):  # pragma: no cover - compiled
+    """OneEuroFilter's packet after the first, in place; c = (min_cutoff, β, d_cutoff):
+    dx = (z - x̂) rate ;  dx̂ ← dx̂ + α(rate, d_cutoff) (dx - dx̂) ;  fc = min_cutoff + β |dx̂| ;
+    x̂ ← x̂ + α(rate, fc) (z - x̂) ;  α(rate, fc) = 1 / (1 + rate / (2π fc))"""
+    tau_d = 1.0 / (2.0 * math.pi * c[2])
+    alpha_d = 1.0 / (1.0 + tau_d * rate)
+    for i in range(x_hat.shape[0]):
+        dx = (z[i] - x_hat[i]) * rate
+        dx_hat[i] = dx_hat[i] + alpha_d * (dx - dx_hat[i])
+        cutoff = c[0] + c[1] * abs(dx_hat[i])
+        tau = 1.0 / (2.0 * math.pi * cutoff)
+        alpha = 1.0 / (1.0 + tau * rate)
+        x_hat[i] = x_hat[i] + alpha * (z[i] - x_hat[i])
+
+
+class KernelOneEuro(OneEuroFilter):
+    """`OneEuroFilter` with its packet's arithmetic compiled (in place on its state arrays)."""
+
+    def __init__(self, params: object, size: int = 3) -> None:
+        super().__init__(params, size)  # type: ignore[arg-type]
+        self._c = np.array(
+            [params.min_cutoff_hz, params.beta, params.d_cutoff_hz]  # type: ignore[attr-defined]
+        )
+
+    def step(self, dt: float, z: Vec3 | None) -> Vec3:
+        self._since_packet += dt
+        if z is not None:
+            if not self._started:
+                self.x_hat = np.array(z, dtype=np.float64)
+                self._started = True
+            else:
+                _one_euro(
+                    self.x_hat, self.dx_hat, np.asarray(z, dtype=np.float64),
+                    1.0 / self._since_packet, self._c,
+                )  # fmt: skip
+            self._since_packet = 0.0
+        return self.x_hat.copy()
+
+
+def compiled_filter(f: object) -> object:
+    """A baseline filter's compiled twin with the same parameters, or `f` itself."""
+    if type(f) is ButterworthFilter:
+        return KernelButterworth(f.params, f.size)
+    if type(f) is OneEuroFilter:
+        return KernelOneEuro(f.params, f.size)
+    return f
+
+
 _warm = False
 
 
@@ -413,3 +514,9 @@ def warm_up() -> None:
     cons.attach(bank)
     bank.set_rotation(np.eye(3))
     estimator_tick(bank, 1e-3, np.zeros(6), np.zeros(3), np.zeros(9), 0.0, True)
+    from hoh_cosim.control.baselines import OneEuroParams
+
+    euro = KernelOneEuro(OneEuroParams())
+    for _ in range(2):
+        euro.step(1e-3, np.zeros(3))
+    _butterworth(np.zeros((1, 5)), np.zeros((3, 1, 2)), np.zeros(3), np.empty(3))
