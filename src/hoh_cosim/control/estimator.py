@@ -52,7 +52,7 @@ from hoh_cosim.control.kalman import KalmanBank, KalmanParams, SteadyStateForceK
 from hoh_cosim.control.kernels import (
     KernelConsistency,
     KernelKalmanBank,
-    compiled_filter,
+    compiled_bank,
     estimator_tick,
     kernels_enabled,
     warm_up,
@@ -380,7 +380,7 @@ class Estimator:
         if self._kernel:
             self._filters = KernelKalmanBank(self._filters.channels)
         elif kernels_enabled() and isinstance(self._filters, _SeparateFilters):
-            self._filters.filters = tuple(compiled_filter(f) for f in self._filters.filters)
+            self._filters = compiled_bank(self._filters.filters) or self._filters
         if kernels_enabled():
             warm_up()  # loaded now, never in the first ticks of a real-time loop
         self._ft = _SensorChannel("ft_counter", "wrench_S", p.ft_rebias_packets, p.ft_bias)

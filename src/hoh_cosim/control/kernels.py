@@ -42,11 +42,11 @@ from hoh_cosim.errors import ConfigError
 
 __all__ = [
     "KERNEL_MODES",
-    "KernelButterworth",
+    "KernelButterworthBank",
     "KernelConsistency",
     "KernelKalmanBank",
-    "KernelOneEuro",
-    "compiled_filter",
+    "KernelOneEuroBank",
+    "compiled_bank",
     "estimator_tick",
     "kernels_enabled",
     "use_kernels",
@@ -399,14 +399,21 @@ def estimator_tick(
 
 
 # --- the baseline filters (baselines.ButterworthFilter, baselines.OneEuroFilter) ----------------
+#
+# The estimator runs three of one kind (hand force, hand torque, probe force); compiled, the three
+# are one bank stepped in one call, like the Kalman bank.
 
 
 @njit(cache=True, nogil=True)
-def _butterworth(sections, zi, held, out):  # pragma: no cover - compiled
-    """One sample of every axis through the second-order sections (b0, b1, b2, a1, a2), transposed
-    direct form II as scipy's `sosfilt`, the same operations in the same order:
+def _butterworth(sections, zi, held, on, out):  # pragma: no cover - compiled
+    """One sample of every axis that has had a packet (on[a] = 1) through the second-order sections
+    (b0, b1, b2, a1, a2), transposed direct form II as scipy's `sosfilt`, the same operations in the
+    same order (the others give 0):
     y = b0 x + s0 ;  s0 ← b1 x - a1 y + s1 ;  s1 ← b2 x - a2 y ;  x ← y   (each section)"""
     for a in range(held.shape[0]):
+        if on[a] == 0.0:
+            out[a] = 0.0
+            continue
         x = held[a]
         for k in range(sections.shape[0]):
             y = sections[k, 0] * x + zi[a, k, 0]
@@ -416,83 +423,120 @@ def _butterworth(sections, zi, held, out):  # pragma: no cover - compiled
         out[a] = x
 
 
-class KernelButterworth(ButterworthFilter):
-    """`ButterworthFilter` with its per-sample sections compiled: the same design (scipy's), the
-    same state, the same numbers."""
+class KernelButterworthBank:
+    """Three-axis `ButterworthFilter`s, one per channel, compiled as one bank: the same design
+    (scipy's, at the first step), the same steady start at each channel's first packet, the same
+    numbers."""
+
+    def __init__(self, filters: Sequence[ButterworthFilter]) -> None:
+        self.filters = tuple(filters)  # the designs (pure objects: never stepped)
+        self.n = 3 * len(self.filters)
+        self._dt = math.nan
+        self.reset()
 
     def reset(self) -> None:
-        super().reset()
-        self._held_a: Vec | None = None
-        self._zi_a: Vec | None = None
+        self._held = np.zeros(self.n)
+        self._on = np.zeros(self.n)  # 1 on the axes of a channel that has had a packet
+        self._zi: Vec | None = None if math.isnan(self._dt) else np.zeros_like(self._zi)
 
-    def _design(self, dt: float) -> None:
-        super()._design(dt)
-        self._sections_a = np.array(self._sections, dtype=np.float64)
-
-    def step(self, dt: float, z: Vec | None) -> Vec:
+    def step_bank(self, dt: float, measurements: Sequence[Vec | None]) -> Vec:
         if dt != self._dt:
             if not math.isnan(self._dt):
                 raise ConfigError(f"dt: the filter was designed for {self._dt} s, got {dt} s")
-            self._design(dt)
-        if z is not None:
-            self._held_a = np.array(z, dtype=np.float64)
-            if self._zi_a is None:  # the steady state for the first packet, per axis and section
-                unit = np.array(self._zi_unit, dtype=np.float64)
-                self._zi_a = self._held_a[:, np.newaxis, np.newaxis] * unit[np.newaxis, :, :]
-        if self._held_a is None:
-            return np.zeros(self.size)
-        out = np.empty(self.size)
-        _butterworth(self._sections_a, self._zi_a, self._held_a, out)
+            first = self.filters[0]
+            first._design(dt)
+            for f in self.filters[1:]:
+                if f.params != first.params:
+                    raise ConfigError("a compiled Butterworth bank needs one design")
+            self._sections = np.array(first._sections, dtype=np.float64)
+            self._unit = np.array(first._zi_unit, dtype=np.float64)
+            self._zi = np.zeros((self.n, len(first._sections), 2))
+            self._dt = dt
+        for c, z in enumerate(measurements):
+            if z is not None:
+                axes = slice(3 * c, 3 * c + 3)
+                self._held[axes] = z
+                if self._on[3 * c] == 0.0:  # the steady state for the channel's first packet
+                    self._zi[axes] = self._held[axes, np.newaxis, np.newaxis] * self._unit
+                    self._on[axes] = 1.0
+        out = np.empty(self.n)
+        _butterworth(self._sections, self._zi, self._held, self._on, out)
         return out
 
 
 @njit(cache=True, nogil=True)
-def _one_euro(x_hat, dx_hat, z, rate, c):  # pragma: no cover - compiled
-    """OneEuroFilter's packet after the first, in place; c = (min_cutoff, β, d_cutoff):
+def _one_euro(x_hat, dx_hat, since, started, z, on, dt, c, out):  # pragma: no cover - compiled
+    """Every channel's `OneEuroFilter` step (3 axes a channel): `since` += dt; on a packet
+    (on[channel] = 1) the first initialises x̂ = z, the others, with rate = 1 / since and
+    c[channel] = (min_cutoff, β, d_cutoff):
     dx = (z - x̂) rate ;  dx̂ ← dx̂ + α(rate, d_cutoff) (dx - dx̂) ;  fc = min_cutoff + β |dx̂| ;
-    x̂ ← x̂ + α(rate, fc) (z - x̂) ;  α(rate, fc) = 1 / (1 + rate / (2π fc))"""
-    tau_d = 1.0 / (2.0 * math.pi * c[2])
-    alpha_d = 1.0 / (1.0 + tau_d * rate)
-    for i in range(x_hat.shape[0]):
-        dx = (z[i] - x_hat[i]) * rate
-        dx_hat[i] = dx_hat[i] + alpha_d * (dx - dx_hat[i])
-        cutoff = c[0] + c[1] * abs(dx_hat[i])
-        tau = 1.0 / (2.0 * math.pi * cutoff)
-        alpha = 1.0 / (1.0 + tau * rate)
-        x_hat[i] = x_hat[i] + alpha * (z[i] - x_hat[i])
-
-
-class KernelOneEuro(OneEuroFilter):
-    """`OneEuroFilter` with its packet's arithmetic compiled (in place on its state arrays)."""
-
-    def __init__(self, params: object, size: int = 3) -> None:
-        super().__init__(params, size)  # type: ignore[arg-type]
-        self._c = np.array(
-            [params.min_cutoff_hz, params.beta, params.d_cutoff_hz]  # type: ignore[attr-defined]
-        )
-
-    def step(self, dt: float, z: Vec3 | None) -> Vec3:
-        self._since_packet += dt
-        if z is not None:
-            if not self._started:
-                self.x_hat = np.array(z, dtype=np.float64)
-                self._started = True
+    x̂ ← x̂ + α(rate, fc) (z - x̂) ;  α(rate, fc) = 1 / (1 + τ rate), τ = 1 / (2π fc);
+    then `since` = 0. x̂ into `out`."""
+    for ch in range(since.shape[0]):
+        since[ch] += dt
+        if on[ch] != 0.0:
+            if started[ch] == 0.0:
+                for i in range(3 * ch, 3 * ch + 3):
+                    x_hat[i] = z[i]
+                started[ch] = 1.0
             else:
-                _one_euro(
-                    self.x_hat, self.dx_hat, np.asarray(z, dtype=np.float64),
-                    1.0 / self._since_packet, self._c,
-                )  # fmt: skip
-            self._since_packet = 0.0
-        return self.x_hat.copy()
+                rate = 1.0 / since[ch]
+                tau_d = 1.0 / (2.0 * math.pi * c[ch, 2])
+                alpha_d = 1.0 / (1.0 + tau_d * rate)
+                for i in range(3 * ch, 3 * ch + 3):
+                    dx = (z[i] - x_hat[i]) * rate
+                    dx_hat[i] = dx_hat[i] + alpha_d * (dx - dx_hat[i])
+                    tau = 1.0 / (2.0 * math.pi * (c[ch, 0] + c[ch, 1] * abs(dx_hat[i])))
+                    alpha = 1.0 / (1.0 + tau * rate)
+                    x_hat[i] = x_hat[i] + alpha * (z[i] - x_hat[i])
+            since[ch] = 0.0
+    for i in range(x_hat.shape[0]):
+        out[i] = x_hat[i]
 
 
-def compiled_filter(f: object) -> object:
-    """A baseline filter's compiled twin with the same parameters, or `f` itself."""
-    if type(f) is ButterworthFilter:
-        return KernelButterworth(f.params, f.size)
-    if type(f) is OneEuroFilter:
-        return KernelOneEuro(f.params, f.size)
-    return f
+class KernelOneEuroBank:
+    """Three-axis `OneEuroFilter`s, one per channel with its own tuning, compiled as one bank."""
+
+    def __init__(self, filters: Sequence[OneEuroFilter]) -> None:
+        self.filters = tuple(filters)
+        self._c = np.array(
+            [[f.params.min_cutoff_hz, f.params.beta, f.params.d_cutoff_hz] for f in filters]
+        )
+        self._z = np.zeros(3 * len(self.filters))
+        self._on = np.zeros(len(self.filters))
+        self.reset()
+
+    def reset(self) -> None:
+        n = len(self.filters)
+        self._x_hat, self._dx_hat = np.zeros(3 * n), np.zeros(3 * n)
+        self._since, self._started = np.zeros(n), np.zeros(n)
+
+    def step_bank(self, dt: float, measurements: Sequence[Vec | None]) -> Vec:
+        on = self._on
+        for c, z in enumerate(measurements):
+            if z is None:
+                on[c] = 0.0
+            else:
+                on[c] = 1.0
+                self._z[3 * c : 3 * c + 3] = z
+        out = np.empty(self._x_hat.size)
+        _one_euro(
+            self._x_hat, self._dx_hat, self._since, self._started, self._z, on, dt, self._c, out
+        )
+        return out
+
+
+def compiled_bank(filters: Sequence[object]) -> KernelButterworthBank | KernelOneEuroBank | None:
+    """The compiled bank of these three-axis filters if they are all of one compiled kind (and the
+    Butterworth filters of one design), else None."""
+    if filters and all(
+        type(f) is ButterworthFilter and f.size == 3 and f.params == filters[0].params  # type: ignore[attr-defined]
+        for f in filters
+    ):
+        return KernelButterworthBank(filters)  # type: ignore[arg-type]
+    if filters and all(type(f) is OneEuroFilter and f.size == 3 for f in filters):
+        return KernelOneEuroBank(filters)  # type: ignore[arg-type]
+    return None
 
 
 _warm = False
@@ -505,6 +549,7 @@ def warm_up() -> None:
     if _warm:
         return
     _warm = True
+    from hoh_cosim.control.baselines import ButterworthParams, OneEuroParams
     from hoh_cosim.control.probe_correction import ProbeCorrectionParams
 
     bank = KernelKalmanBank([KalmanParams(q=[1.0] * 3, r=[1.0] * 3)] * 3)
@@ -514,9 +559,9 @@ def warm_up() -> None:
     cons.attach(bank)
     bank.set_rotation(np.eye(3))
     estimator_tick(bank, 1e-3, np.zeros(6), np.zeros(3), np.zeros(9), 0.0, True)
-    from hoh_cosim.control.baselines import OneEuroParams
-
-    euro = KernelOneEuro(OneEuroParams())
+    euro = KernelOneEuroBank([OneEuroFilter(OneEuroParams())] * 3)
     for _ in range(2):
-        euro.step(1e-3, np.zeros(3))
-    _butterworth(np.zeros((1, 5)), np.zeros((3, 1, 2)), np.zeros(3), np.empty(3))
+        euro.step_bank(1e-3, (np.zeros(3), None, np.zeros(3)))
+    KernelButterworthBank([ButterworthFilter(ButterworthParams())] * 3).step_bank(
+        1e-3, (np.zeros(3), None, None)
+    )
