@@ -249,11 +249,14 @@ class _SeparateFilters:
 def import_filter_libraries(params: EstimatorParams) -> None:
     """Import now what `params.filter` imports when it is built or first stepped (scipy.signal for
     the Butterworth filter, python-control for the steady-state Kalman gain: each most of a
-    second), so that a real-time loop that builds or steps the estimator later never waits for it."""
+    second), so that a real-time loop that builds or steps the estimator later never waits for it;
+    the same for the compiled kernels (hoh_cosim.control.kernels), loaded or compiled now."""
     if params.filter == "butterworth":
         import scipy.signal  # noqa: F401
     elif params.filter == "steady_kalman":
         import control  # noqa: F401
+    if kernels_enabled():
+        warm_up()
 
 
 def make_filter_bank(params: EstimatorParams) -> FilterBank:

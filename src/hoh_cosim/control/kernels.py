@@ -393,6 +393,8 @@ def estimator_tick(
         bank.z[6:9] = probe_z
         lo, hi = min(lo, 6), 9
     code = lo + 16 * hi
+    if R_BS.dtype != np.float64 or not R_BS.flags.c_contiguous:  # never a new compile in a loop
+        R_BS = np.ascontiguousarray(R_BS, dtype=np.float64)
     in_B = np.empty((4, 3))
     _estimator_tick(bank.state, bank.constants, R_BS, t, code + 256 * check, in_B)
     return in_B
