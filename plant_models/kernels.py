@@ -22,12 +22,17 @@ frame's origin (LOCAL_WORLD_ALIGNED, [v; ω]) has the columns [z_i × (p_f - o_i
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from hoh_cosim.control.kernels import kernels_enabled
 from hoh_cosim.errors import ConfigError
 
 __all__ = ["KINEMATICS_LAYOUT", "KernelUR5", "kernels_enabled"]
+
+_IN = types.Array(types.float64, 1, "A", readonly=True)
+"""An input vector of any layout, writable or not: one compiled version for every caller (a
+scenario's buffers, a rehearsal world's read-only zeros), never a compile in a running loop."""
+_OUT = types.Array(types.float64, 1, "C")
 
 KINEMATICS_LAYOUT = {
     "pose_T": slice(0, 12),  # p_BT_B, then R_BT row by row
@@ -250,7 +255,7 @@ def loads_constants(tool: object, g_B: np.ndarray) -> np.ndarray:
     )
 
 
-@njit(cache=True, nogil=True)
+@njit(types.void(_IN, _IN, _IN, _IN, _IN, _OUT), cache=True, nogil=True)
 def _loads(C, k, F_hand, tau_hand, F_contact, out):  # pragma: no cover - compiled
     """(wrench of the tool on the wrist sensor in S, force of the probe on the probe sensor in P)
     into `out` (9,), from the kinematics `k` (KINEMATICS_LAYOUT) and the loads in B:
@@ -340,6 +345,75 @@ def tool_loads(
 
 
 @njit(cache=True, nogil=True)
+def _singular_extremes(J):  # pragma: no cover - compiled
+    """(σ_min, σ_max) of a square J by one-sided Jacobi (Hestenes): plane rotations of column pairs
+    until every pair is orthogonal to rounding, then σ = the columns' norms. Accurate to rounding
+    relative to σ_max, like LAPACK's SVD (compiled here in a fraction of the time LAPACK's binding
+    takes to compile)."""
+    n = J.shape[1]
+    A = J.copy()
+    for _ in range(60):
+        rotated = False
+        for i in range(n - 1):
+            for j in range(i + 1, n):
+                alpha = beta = gamma = 0.0
+                for k in range(A.shape[0]):
+                    alpha += A[k, i] * A[k, i]
+                    beta += A[k, j] * A[k, j]
+                    gamma += A[k, i] * A[k, j]
+                if gamma == 0.0 or abs(gamma) <= 1e-17 * np.sqrt(alpha * beta):
+                    continue
+                rotated = True
+                zeta = (beta - alpha) / (2.0 * gamma)
+                t = (1.0 if zeta >= 0.0 else -1.0) / (abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+                c = 1.0 / np.sqrt(1.0 + t * t)
+                s = c * t
+                for k in range(A.shape[0]):
+                    a_ki, a_kj = A[k, i], A[k, j]
+                    A[k, i] = c * a_ki - s * a_kj
+                    A[k, j] = s * a_ki + c * a_kj
+        if not rotated:
+            break
+    lo, hi = np.inf, 0.0
+    for j in range(n):
+        norm = 0.0
+        for k in range(A.shape[0]):
+            norm += A[k, j] * A[k, j]
+        norm = np.sqrt(norm)
+        lo, hi = min(lo, norm), max(hi, norm)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def _solve(A, b):  # pragma: no cover - compiled
+    """x with A x = b, A square: LU with partial pivoting (as LAPACK's gesv), on copies."""
+    n = A.shape[0]
+    M = A.copy()
+    x = b.copy()
+    for col in range(n):
+        pivot = col
+        for r in range(col + 1, n):
+            if abs(M[r, col]) > abs(M[pivot, col]):
+                pivot = r
+        if pivot != col:
+            for c in range(n):
+                M[col, c], M[pivot, c] = M[pivot, c], M[col, c]
+            x[col], x[pivot] = x[pivot], x[col]
+        for r in range(col + 1, n):
+            f = M[r, col] / M[col, col]
+            M[r, col] = f
+            for c in range(col + 1, n):
+                M[r, c] -= f * M[col, c]
+            x[r] -= f * x[col]
+    for r in range(n - 1, -1, -1):
+        total = x[r]
+        for c in range(r + 1, n):
+            total -= M[r, c] * x[c]
+        x[r] = total / M[r, r]
+    return x
+
+
+@njit(cache=True, nogil=True)
 def _arm_cycle(G, frame, state, active, robot_twist, svd, P, out):  # pragma: no cover
     """One robot cycle's arithmetic: the tracked twist moved towards the active command (at most
     a·T, a_rot·T), the joint velocities by damped least squares (the SVD skipped when Weyl's bound
@@ -393,20 +467,31 @@ def _arm_cycle(G, frame, state, active, robot_twist, svd, P, out):  # pragma: no
         if bound >= threshold + P[7] * svd[37]:
             sigma_min = bound
     if sigma_min < 0.0:
-        sigma = np.linalg.svd(J)[1]
+        lo, hi = _singular_extremes(J)
         for i in range(6):
             for j in range(6):
                 svd[6 * i + j] = J[i, j]
-        svd[36], svd[37], svd[38] = sigma[-1], sigma[0], 1.0
-        sigma_min = sigma[-1]
+        svd[36], svd[37], svd[38] = lo, hi, 1.0
+        sigma_min = lo
     if sigma_min >= threshold:
-        qd = np.linalg.solve(J, twist)
+        qd = _solve(J, twist)
     else:
         lam2 = (1.0 - (sigma_min / threshold) ** 2) * max_damping**2
-        A = J @ J.T
+        A = np.empty((6, 6))
         for i in range(6):
+            for j in range(6):
+                total = 0.0
+                for k in range(6):
+                    total += J[i, k] * J[j, k]
+                A[i, j] = total
             A[i, i] += lam2
-        qd = J.T @ np.linalg.solve(A, twist)
+        y = _solve(A, twist)
+        qd = np.empty(6)
+        for i in range(6):
+            total = 0.0
+            for k in range(6):
+                total += J[k, i] * y[k]
+            qd[i] = total
     peak = 0.0
     nan = False
     for i in range(nj):

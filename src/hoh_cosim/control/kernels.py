@@ -33,7 +33,7 @@ import os
 from collections.abc import Iterator, Sequence
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from hoh_cosim.control.baselines import ButterworthFilter, OneEuroFilter
 from hoh_cosim.control.kalman import KalmanParams, axis_transition, process_noise
@@ -344,7 +344,16 @@ def _consistency(state, c, t, rows):  # pragma: no cover - compiled
 # --- the estimator's tick once ready (estimator.Estimator.step) ---------------------------------
 
 
-@njit(cache=True, nogil=True)
+_IN = types.Array(types.float64, 1, "A", readonly=True)
+"""An input vector of any layout, writable or not: one compiled version for every caller, never a
+compile in a running loop."""
+
+
+@njit(
+    types.void(types.float64[::1], _IN, _IN, types.float64, types.int64, types.float64[:, ::1]),
+    cache=True,
+    nogil=True,
+)
 def _estimator_tick(S, C, R_BS, t, code, in_B):  # pragma: no cover - compiled
     """The bank's tick (`_predict_correct`: axes lo..hi-1 corrected, code = lo + 16 hi + 256 check),
     the filtered forces into in_S (rows F_hand, τ_hand, F_probe = R_SP F_P, in S; the fourth row,
@@ -393,8 +402,6 @@ def estimator_tick(
         bank.z[6:9] = probe_z
         lo, hi = min(lo, 6), 9
     code = lo + 16 * hi
-    if R_BS.dtype != np.float64 or not R_BS.flags.c_contiguous:  # never a new compile in a loop
-        R_BS = np.ascontiguousarray(R_BS, dtype=np.float64)
     in_B = np.empty((4, 3))
     _estimator_tick(bank.state, bank.constants, R_BS, t, code + 256 * check, in_B)
     return in_B
