@@ -9,12 +9,14 @@ the whole of that arithmetic over the block's own state arrays.
 
 Two implementations, one behaviour:
 - the pure one (`hoh_cosim.control.kalman.KalmanBank`, `probe_correction.ContactConsistency`, the
-  estimator's numpy code) stays the reference: readable, checked against filterpy;
-- the compiled one (`KernelKalmanBank` and `KernelConsistency` below) is the default everywhere the
-  estimator runs: in-process, inside the FMUs (they run in the host's Python), in the hardware
-  runner and in replay. It computes the same formulas in another order (no BLAS, which fuses
-  multiply-adds, and one covariance prediction per tick instead of owed ones), so it agrees with
-  the pure path to rounding: within 1e-12 relative, tested on recorded inputs, not to the bit.
+  baseline filters of `baselines.py`, the estimator's numpy code) stays the reference: readable,
+  checked against filterpy, scipy and the 1€ filter's reference implementation;
+- the compiled one (`KernelKalmanBank`, `KernelConsistency`, `KernelButterworthBank`,
+  `KernelOneEuroBank` below) is the default everywhere the estimator runs: in-process, inside the
+  FMUs (they run in the host's Python), in the hardware runner and in replay. It computes the same
+  formulas, the Kalman bank's in another order (no BLAS, which fuses multiply-adds, and one
+  covariance prediction per tick instead of owed ones), so it agrees with the pure path to
+  rounding: within 1e-12 relative, tested on recorded inputs, not to the bit.
 
 `HOH_COSIM_KERNELS=pure` in the environment (or `use_kernels(False)`) makes blocks built from then
 on take the pure path, e.g. to check a result against the reference.
