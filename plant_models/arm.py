@@ -24,6 +24,7 @@ import numpy as np
 
 from hoh_cosim.control.vectors import Vec, as_scalar, as_vector, frozen
 from hoh_cosim.errors import ConfigError
+from plant_models.kernels import KernelUR5, arm_advance, arm_cycle
 from plant_models.ur5 import JOINT_POSITION_LIMIT, JOINT_SPEED_LIMIT, UR5Model
 
 __all__ = ["HOME_Q", "ArmParams", "SpeedLArm", "damped_least_squares"]
@@ -141,11 +142,23 @@ class SpeedLArm:
     # LAPACK's singular values (a few ulp of σ_max) and of the distance's rounding
     _WEYL_MARGIN = 1e-9
 
-    def __init__(self, params: ArmParams, model: UR5Model, tcp: str = "tcp") -> None:
+    def __init__(self, params: ArmParams, model: UR5Model | KernelUR5, tcp: str = "tcp") -> None:
         self.params = params
         self.model = model
         self.tcp = tcp
         self.period = 1.0 / params.rate_hz
+        # with compiled kinematics the cycle's arithmetic is compiled too (plant_models.kernels)
+        self._compiled: Vec | None = None
+        if isinstance(model, KernelUR5):
+            T = self.period
+            self._compiled = np.array(
+                [
+                    *(params.acceleration * T, params.angular_acceleration * T),
+                    *(params.dls_threshold, params.dls_max_damping),
+                    *(params.joint_speed_limit, params.joint_position_limit),
+                    *(T, self._WEYL_MARGIN),
+                ]
+            )
         self.reset()
 
     def reset(self) -> None:
@@ -159,6 +172,7 @@ class SpeedLArm:
         self.active = np.zeros(6)
         self._ramp_left = 0.0
         self._svd_at: tuple[Vec, float, float] | None = None  # (J, σ_min, σ_max) of the last SVD
+        self._svd = np.zeros(39)  # the same for the compiled cycle: J (36), σ_min, σ_max, taken
         # (what the last computed cycle depended on, what it set)
         self._cycled: tuple[tuple[bytes, ...], tuple[Any, ...]] | None = None
 
@@ -179,6 +193,20 @@ class SpeedLArm:
         key = (active.tobytes(), self.robot_twist.tobytes(), self.state[:12].tobytes())
         if self._cycled is not None and self._cycled[0] == key:
             self.robot_twist, self._qdd, self.qdd = self._cycled[1]
+            return
+        if self._compiled is not None:  # what follows, in one compiled call
+            out = arm_cycle(
+                self.model,
+                self.tcp,
+                self.state,
+                active,
+                self.robot_twist,
+                self._svd,
+                self._compiled,
+            )
+            self.robot_twist, self.qdd = out[:6], out[6:]
+            self._qdd = self.qdd.tolist()
+            self._cycled = (key, (self.robot_twist, self._qdd, self.qdd))
             return
         self.robot_twist = _step_towards(
             self.robot_twist, active, p.acceleration * T, p.angular_acceleration * T
@@ -221,6 +249,14 @@ class SpeedLArm:
         """Integrate over dt: the cycle's constant joint acceleration until its ramp ends, then
         constant velocity (exact either way)."""
         ramp = min(dt, self._ramp_left)
+        if self._compiled is not None:  # the same, on the state array (the lists are not kept)
+            self.state = state = arm_advance(self.state, self.qdd, ramp, dt)
+            self.q, self.qd, self.qdd_mean = state[:6], state[6:12], state[12:]
+            self._ramp_left -= ramp
+            if self._ramp_left <= 0.0:
+                self._qdd = [0.0] * 6
+                self.qdd = np.zeros(6)
+            return
         c = 0.5 * ramp * ramp + ramp * (dt - ramp)
         q, qd, qdd = self._q, self._qd, self._qdd
         self._q = [q[i] + qd[i] * dt + qdd[i] * c for i in _JOINTS]

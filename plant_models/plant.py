@@ -23,6 +23,7 @@ import numpy as np
 from hoh_cosim.control.block import TWIST_UNITS, WRENCH_UNITS, Port
 from hoh_cosim.control.vectors import GRAVITY_B, Vec, Vec3, as_vector
 from plant_models.arm import ArmParams, SpeedLArm
+from plant_models.kernels import KernelUR5, kernels_enabled, loads_constants, tool_loads
 from plant_models.tissue import PhantomParams, contact_force
 from plant_models.tool import ToolLoads, ToolModel
 from plant_models.ur5 import FramePlacement, UR5Model
@@ -80,8 +81,14 @@ class Plant:
             for name, (p_EX_E, R_EX) in p.tool.flange_frames().items()
         )
         self.model = UR5Model(frames)
-        self.arm = SpeedLArm(p.arm, self.model)
+        # the kinematics compiled (plant_models.kernels), from the pinocchio model's placements;
+        # pinocchio stays the reference they are checked against
+        self._kernel = KernelUR5(self.model) if kernels_enabled() else None
+        if self._kernel is not None:
+            self._kernel.warm_up()
+        self.arm = SpeedLArm(p.arm, self._kernel or self.model)
         self._loads = ToolLoads(p.tool, p.g_B)
+        self._loads_constants = loads_constants(p.tool, p.g_B)
         self.reset()
 
     def reset(self) -> None:
@@ -141,11 +148,18 @@ class Plant:
             return at[1]
         arm = self.arm
         m = self.model
-        m.update(arm.q, arm.qd, arm.qdd_mean)
-        pose_T = m.homogeneous("tcp").take(_POSE_ENTRIES)  # [p_BT_B; R_BT]
-        pose_S = m.homogeneous("ft_sensor").take(_POSE_ENTRIES)
-        twist = m.twist("tcp")
-        a_C = m.acceleration("tool_com").tolist()  # [a_C; α]
+        if self._kernel is not None:  # the same quantities in one compiled call
+            k = self._k = self._kernel.tool_kinematics_at(arm.state)
+            pose_T, pose_S, twist = k[:12], k[12:24], k[24:30]
+            a_C = k[30:36].tolist()
+            a_P = k[36:39]
+        else:
+            m.update(arm.q, arm.qd, arm.qdd_mean)
+            pose_T = m.homogeneous("tcp").take(_POSE_ENTRIES)  # [p_BT_B; R_BT]
+            pose_S = m.homogeneous("ft_sensor").take(_POSE_ENTRIES)
+            twist = m.twist("tcp")
+            a_C = m.acceleration("tool_com").tolist()  # [a_C; α]
+            a_P = m.acceleration("probe_sensor")[:3] if self._probe_mass else None
         p_BS, R_BS_rows = pose_S[:3], pose_S[3:]
         R_BS = R_BS_rows.reshape(3, 3)
         kinematics = (
@@ -158,7 +172,7 @@ class Plant:
             a_C,
             twist[3:].tolist(),  # ω
             None if self._p_SK_S is None else p_BS + R_BS @ self._p_SK_S,  # p_BK
-            m.acceleration("probe_sensor")[:3] if self._probe_mass else None,  # a_P
+            a_P if self._probe_mass else None,
         )
         self._kinematics_at = (state, kinematics)
         return kinematics
@@ -178,19 +192,25 @@ class Plant:
         p_BT, R_BT, twist, p_BS, R_BS_rows, R_BS, a_C, omega, p_BK, a_P = kinematics
         contact = contact_force(self.params.phantom, p_BT, twist[:3])
         # a push on the tip loads both sensors as a contact does
-        c0, c1, c2 = contact.force_B.tolist()
-        t0, t1, t2 = F_tip_B.tolist()
-        wrench_S, force_P = self._loads.readings(
-            R_BS,
-            a_C[:3],
-            omega,
-            a_C[3:],
-            F_hand_B.tolist(),
-            tau_hand_B.tolist(),
-            [c0 + t0, c1 + t1, c2 + t2],
-            p_BK,
-            a_P,
-        )
+        if self._kernel is not None:  # ToolLoads.readings, compiled
+            loads = tool_loads(
+                self._loads_constants, self._k, F_hand_B, tau_hand_B, contact.force_B + F_tip_B
+            )
+            wrench_S, force_P = loads[:6], loads[6:]
+        else:
+            c0, c1, c2 = contact.force_B.tolist()
+            t0, t1, t2 = F_tip_B.tolist()
+            wrench_S, force_P = self._loads.readings(
+                R_BS,
+                a_C[:3],
+                omega,
+                a_C[3:],
+                F_hand_B.tolist(),
+                tau_hand_B.tolist(),
+                [c0 + t0, c1 + t1, c2 + t2],
+                p_BK,
+                a_P,
+            )
         depth = contact.depth
         self._evaluated_at = key
         self._outputs = {

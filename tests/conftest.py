@@ -1,5 +1,5 @@
-"""Shared fixtures: a seeded random generator, deterministic property tests, and a check that
-pytest-xdist keeps its groups."""
+"""Shared fixtures: a seeded random generator, deterministic property tests, a check that
+pytest-xdist keeps its groups, and the compiled kernels loaded once before the workers start."""
 
 from __future__ import annotations
 
@@ -41,3 +41,18 @@ def pytest_configure(config: pytest.Config) -> None:
             "--dist loadgroup ignores the xdist_group marks (pytest-xdist issue 1386); "
             'install the test extra (pytest below 9.2): pip install ".[test]"'
         )
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile (on a fresh machine) or load the kernels of hoh_cosim.control.kernels and
+    plant_models.kernels once, in the process that starts the workers: otherwise every worker
+    compiles them at once at its first test (10-30 s each on a fresh machine, measured), and the
+    real-time tests' worlds would wait for it. Later processes load them from the cache."""
+    if hasattr(session.config, "workerinput"):
+        return
+    from hoh_cosim.control.kernels import warm_up
+    from plant_models.plant import Plant
+
+    warm_up()
+    Plant()

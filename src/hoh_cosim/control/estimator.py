@@ -49,6 +49,14 @@ from hoh_cosim.control.block import WRENCH_UNITS, Port
 from hoh_cosim.control.frames import R_BS_EQ1, R_SP_SEED
 from hoh_cosim.control.gravity import SEED_TOOL, GravityModel, ToolParams
 from hoh_cosim.control.kalman import KalmanBank, KalmanParams, SteadyStateForceKalman
+from hoh_cosim.control.kernels import (
+    KernelConsistency,
+    KernelKalmanBank,
+    compiled_bank,
+    estimator_tick,
+    kernels_enabled,
+    warm_up,
+)
 from hoh_cosim.control.probe_correction import (
     ContactConsistency,
     ProbeCorrection,
@@ -241,11 +249,14 @@ class _SeparateFilters:
 def import_filter_libraries(params: EstimatorParams) -> None:
     """Import now what `params.filter` imports when it is built or first stepped (scipy.signal for
     the Butterworth filter, python-control for the steady-state Kalman gain: each most of a
-    second), so that a real-time loop that builds or steps the estimator later never waits for it."""
+    second), so that a real-time loop that builds or steps the estimator later never waits for it;
+    the same for the compiled kernels (hoh_cosim.control.kernels), loaded or compiled now."""
     if params.filter == "butterworth":
         import scipy.signal  # noqa: F401
     elif params.filter == "steady_kalman":
         import control  # noqa: F401
+    if kernels_enabled():
+        warm_up()
 
 
 def make_filter_bank(params: EstimatorParams) -> FilterBank:
@@ -366,6 +377,15 @@ class Estimator:
             GravityModel(ToolParams(p.probe_mass_kg), p.g_B) if p.probe_mass_kg > 0 else None
         )
         self._filters = make_filter_bank(p)
+        # the Kalman bank's tick, the consistency check and the turn into B as one compiled call
+        # (hoh_cosim.control.kernels); the numpy code below is the reference it is checked against
+        self._kernel = kernels_enabled() and isinstance(self._filters, KalmanBank)
+        if self._kernel:
+            self._filters = KernelKalmanBank(self._filters.channels)
+        elif kernels_enabled() and isinstance(self._filters, _SeparateFilters):
+            self._filters = compiled_bank(self._filters.filters) or self._filters
+        if kernels_enabled():
+            warm_up()  # loaded now, never in the first ticks of a real-time loop
         self._ft = _SensorChannel("ft_counter", "wrench_S", p.ft_rebias_packets, p.ft_bias)
         self._probe = _SensorChannel(
             "probe_counter", "force_P", p.probe_rebias_packets, p.probe_bias
@@ -376,7 +396,12 @@ class Estimator:
         self._R_PS = p.R_SP.T.copy()
         self._drift_threshold_N = p.probe_correction.mismatch_threshold_N
         self.correction = ProbeCorrection(p.probe_correction)
-        self._consistency = ContactConsistency(p.probe_correction, p.p_SR_S)
+        if self._kernel:
+            self._consistency = KernelConsistency(p.probe_correction, p.p_SR_S)
+            self._consistency.attach(self._filters)
+            self._filters.set_rotation(p.R_SP)
+        else:
+            self._consistency = ContactConsistency(p.probe_correction, p.p_SR_S)
         self.reset()
 
     def reset(self) -> None:
@@ -387,7 +412,8 @@ class Estimator:
         self._t0: float | None = None
         # rows: F_hand, τ_hand, F_probe and F_meas in S, turned into B by one product each tick;
         # the last row holds the latest compensated wrist force between packets
-        self._in_S = np.zeros((4, 3))
+        self._in_S = self._filters.in_S if self._kernel else np.zeros((4, 3))
+        self._in_S[...] = 0.0
         self._m_P = np.zeros(3)
         self._f_P = np.zeros(3)
         self._check_until: float | None = None
@@ -396,6 +422,11 @@ class Estimator:
         self._rejected_out = _FLAG[False]
         self._reset_mismatch()
         self._update_ready()
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if self._kernel:  # a copy's rows in S are its own bank's again (a view, not a copy)
+            self._in_S = self._filters.in_S
 
     def _reset_mismatch(self) -> None:
         """The consistency check starts again: its mismatch, and the output that holds it, are 0."""
@@ -520,21 +551,27 @@ class Estimator:
                 "probe_drift": _FLAG[False],
             }
 
-        if ft_z is None:
-            forces = self._filters.step_bank(dt, (None, None, probe_z))
+        check = ft_z is not None and self._use_probe
+        if self._kernel:  # what the numpy code below does, in one compiled call
+            in_B = estimator_tick(self._filters, dt, ft_z, probe_z, inputs["R_BS"], t, check)
+            mismatch = self._consistency.mismatch if check else self._mismatch
         else:
-            forces = self._filters.step_bank(dt, (ft_z[:3], ft_z[3:], probe_z))
-        in_S = self._in_S  # rows F_hand, τ_hand, F_probe (filtered), F_meas (held), in S
-        in_S[:2] = forces[:6].reshape(2, 3)
-        self._R_SP.dot(forces[6:], out=in_S[2])  # F_probe_S = R_SP F_P
-        if ft_z is not None and self._use_probe:
-            mismatch = self._consistency.step(t, in_S[0], in_S[1], in_S[2])
-            if mismatch != self._mismatch:
-                self._mismatch = mismatch
-                self._mismatch_out = np.array([mismatch])
-        # one product turns all four vectors into B: columns F_hand, τ_hand, F_probe, F_meas
-        # as rows: v_B = R_BS v_S  <=>  row_B = row_S R_BSᵀ
-        in_B = in_S.dot(R_BS.T)
+            if ft_z is None:
+                forces = self._filters.step_bank(dt, (None, None, probe_z))
+            else:
+                forces = self._filters.step_bank(dt, (ft_z[:3], ft_z[3:], probe_z))
+            in_S = self._in_S  # rows F_hand, τ_hand, F_probe (filtered), F_meas (held), in S
+            in_S[:2] = forces[:6].reshape(2, 3)
+            self._R_SP.dot(forces[6:], out=in_S[2])  # F_probe_S = R_SP F_P
+            mismatch = self._mismatch
+            if check:
+                mismatch = self._consistency.step(t, in_S[0], in_S[1], in_S[2])
+            # one product turns all four vectors into B: columns F_hand, τ_hand, F_probe, F_meas
+            # as rows: v_B = R_BS v_S  <=>  row_B = row_S R_BSᵀ
+            in_B = in_S.dot(R_BS.T)
+        if mismatch != self._mismatch:
+            self._mismatch = mismatch
+            self._mismatch_out = np.array([mismatch])
         return {
             "F_hand_B": in_B[0],
             "tau_hand_B": in_B[1],

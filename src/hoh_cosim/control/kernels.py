@@ -1,0 +1,578 @@
+"""Compiled kernels of the control core's hot path (numba), and the switch to the pure reference.
+
+The estimator's tick on a 1 kHz loop is a few hundred floating-point operations spread over some
+20 to 75 small numpy calls (seed 000, Fig. 5: prediction of three constant-acceleration Kalman
+filters, eq. 9, a Joseph-form correction when a packet arrived, the consistency check across the
+probe's axis and the turn of four vectors into the base frame). Each numpy call costs 0.2-0.3 µs of
+dispatch whatever its size, so the tick is dispatch, not arithmetic. One compiled call per tick does
+the whole of that arithmetic over the block's own state arrays.
+
+Two implementations, one behaviour:
+- the pure one (`hoh_cosim.control.kalman.KalmanBank`, `probe_correction.ContactConsistency`, the
+  baseline filters of `baselines.py`, the estimator's numpy code) stays the reference: readable,
+  checked against filterpy, scipy and the 1€ filter's reference implementation;
+- the compiled one (`KernelKalmanBank`, `KernelConsistency`, `KernelButterworthBank`,
+  `KernelOneEuroBank` below) is the default everywhere the estimator runs: in-process, inside the
+  FMUs (they run in the host's Python), in the hardware runner and in replay. It computes the same
+  formulas, the Kalman bank's in another order (no BLAS, which fuses multiply-adds, and one
+  covariance prediction per tick instead of owed ones), so it agrees with the pure path to
+  rounding: within 1e-12 relative, tested on recorded inputs, not to the bit.
+
+`HOH_COSIM_KERNELS=pure` in the environment (or `use_kernels(False)`) makes blocks built from then
+on take the pure path, e.g. to check a result against the reference.
+
+The kernels are compiled once per machine and cached (`cache=True`: next to this file, or in
+numba's user cache when the package directory is read-only, or in `NUMBA_CACHE_DIR`); a fresh
+process loads them from the cache. `warm_up()` loads (or compiles) them now, so that a real-time loop
+never waits for it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from collections.abc import Iterator, Sequence
+
+import numpy as np
+from numba import njit, types
+
+from hoh_cosim.control.baselines import ButterworthFilter, OneEuroFilter
+from hoh_cosim.control.kalman import KalmanParams, axis_transition, process_noise
+from hoh_cosim.control.vectors import Vec, Vec3
+from hoh_cosim.errors import ConfigError
+
+__all__ = [
+    "KERNEL_MODES",
+    "KernelButterworthBank",
+    "KernelConsistency",
+    "KernelKalmanBank",
+    "KernelOneEuroBank",
+    "compiled_bank",
+    "estimator_tick",
+    "kernels_enabled",
+    "use_kernels",
+    "warm_up",
+]
+
+KERNEL_MODES: tuple[str, ...] = ("compiled", "pure")
+_ENV = "HOH_COSIM_KERNELS"
+_enabled: bool | None = None
+
+
+def kernels_enabled() -> bool:
+    """Whether blocks built now take the compiled path (the default) or the pure one."""
+    global _enabled
+    if _enabled is None:
+        mode = os.environ.get(_ENV, "compiled")
+        if mode not in KERNEL_MODES:
+            raise ConfigError(f"{_ENV}: expected one of {', '.join(KERNEL_MODES)}, got {mode!r}")
+        _enabled = mode == "compiled"
+    return _enabled
+
+
+@contextlib.contextmanager
+def use_kernels(enabled: bool) -> Iterator[None]:
+    """Blocks built inside the `with` take the compiled path if `enabled`, else the pure one."""
+    global _enabled
+    before = kernels_enabled()
+    _enabled = bool(enabled)
+    try:
+        yield
+    finally:
+        _enabled = before
+
+
+# --- the Kalman bank (seed 000, eq. 9, section 3.E) ---------------------------------------------
+#
+# A compiled call costs about 0.1 µs per argument to dispatch, more than the arithmetic of a tick,
+# so a bank keeps all its state in one array and all its constants in another:
+#   state:     x (n, 3) | P (n, 3, 3) | z (n) | in_S (4, 3) | consistency (6)
+#   constants: n | F (3, 3) | r (n) | R_SP (3, 3) | consistency (8) | Q (n, 3, 3)
+# (n axes; the estimator's in_S rows and the consistency check are used by `estimator_tick` only).
+
+
+def _state_layout(n: int) -> dict[str, slice]:
+    return {
+        "x": slice(0, 3 * n),
+        "P": slice(3 * n, 12 * n),
+        "z": slice(12 * n, 13 * n),
+        "in_S": slice(13 * n, 13 * n + 12),
+        "consistency": slice(13 * n + 12, 13 * n + 18),
+    }
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _predict_correct(S, C, lo, hi):  # pragma: no cover - compiled
+    """Predict every axis one tick, correct axes lo..hi-1 with their z, symmetrise P.
+
+    x⁻ = F x ;  P⁻ = F P Fᵀ + Q ;  S = P₀₀ + r ;  K = P₀ / S ;  x⁺ = x + K (z - x₀) ;
+    P⁺ = P - K P₀ᵀ - P₀ Kᵀ + S K Kᵀ (Joseph form, expanded with P h = P₀) ;  P ← (P + Pᵀ) / 2
+    """
+    n = int(C[0])
+    F = C[1:10]
+    r = C[10 : 10 + n]
+    Q = C[27 + n :]
+    X, Pa, Z = 0, 3 * n, 12 * n
+    FP = np.empty(9)
+    for a in range(n):
+        xa = X + 3 * a
+        x0, x1, x2 = S[xa], S[xa + 1], S[xa + 2]
+        for i in range(3):
+            S[xa + i] = F[3 * i] * x0 + F[3 * i + 1] * x1 + F[3 * i + 2] * x2
+        # FP = F P, then P = (F P) Fᵀ + Q
+        pa = Pa + 9 * a
+        for i in range(3):
+            for j in range(3):
+                FP[3 * i + j] = (
+                    F[3 * i] * S[pa + j]
+                    + F[3 * i + 1] * S[pa + 3 + j]
+                    + F[3 * i + 2] * S[pa + 6 + j]
+                )
+        for i in range(3):
+            for j in range(3):
+                S[pa + 3 * i + j] = (
+                    FP[3 * i] * F[3 * j]
+                    + FP[3 * i + 1] * F[3 * j + 1]
+                    + FP[3 * i + 2] * F[3 * j + 2]
+                ) + Q[9 * a + 3 * i + j]
+    if hi <= lo:
+        return
+    K = np.empty(3)
+    P0 = np.empty(3)
+    for a in range(lo, hi):
+        pa, xa = Pa + 9 * a, X + 3 * a
+        P0[0], P0[1], P0[2] = S[pa], S[pa + 3], S[pa + 6]
+        s = P0[0] + r[a]
+        innovation = S[Z + a] - S[xa]
+        for i in range(3):
+            K[i] = P0[i] / s
+            S[xa + i] += K[i] * innovation
+        for i in range(3):
+            for j in range(3):
+                S[pa + 3 * i + j] = ((S[pa + 3 * i + j] - K[i] * P0[j]) - P0[i] * K[j]) + (
+                    s * K[i]
+                ) * K[j]
+    for a in range(n):
+        pa = Pa + 9 * a
+        for i in range(3):
+            for j in range(i + 1, 3):
+                m = (S[pa + 3 * i + j] + S[pa + 3 * j + i]) * 0.5
+                S[pa + 3 * i + j] = m
+                S[pa + 3 * j + i] = m
+
+
+@njit(cache=True, nogil=True)
+def _bank_step(S, C, lo, hi):  # pragma: no cover - compiled
+    _predict_correct(S, C, lo, hi)
+
+
+class KernelKalmanBank:
+    """`KalmanBank`'s filters, compiled: the same channels, reset, `x`, `P` and `step_bank`, and
+    the estimator's fused tick (`estimator_tick`) over the same state array."""
+
+    def __init__(self, channels: Sequence[KalmanParams]) -> None:
+        self.channels = tuple(channels)
+        if not self.channels:
+            raise ConfigError("a Kalman bank needs at least one channel")
+        self.n = n = 3 * len(self.channels)
+        self._q = np.concatenate([c.q for c in self.channels])
+        self._P0 = np.array([np.diag(c.p0) for c in self.channels for _ in range(3)])
+        self.state = np.zeros(_state_layout(n)["consistency"].stop)
+        self._views()
+        r = np.concatenate([c.r for c in self.channels])
+        # n | F | r | R_SP | consistency | Q
+        self.constants = np.zeros(27 + n + 9 * n)
+        self.constants[0] = n
+        self.constants[10 : 10 + n] = r
+        self._dt = math.nan
+        self.reset()
+
+    def _views(self) -> None:
+        """The parts of `state`, as views written in place."""
+        n, layout = self.n, _state_layout(self.n)
+        self.x = self.state[layout["x"]].reshape(n, 3)
+        self._P = self.state[layout["P"]].reshape(n, 3, 3)
+        self.z = self.state[layout["z"]]
+        self.in_S = self.state[layout["in_S"]].reshape(4, 3)
+        self.consistency_state = self.state[layout["consistency"]]
+
+    # A copy (pickle, deepcopy: an FMU's state) would turn the views into arrays of their own:
+    # copies are made without them, and they are made anew.
+    _VIEWS = ("x", "_P", "z", "in_S", "consistency_state")
+
+    def __getstate__(self) -> dict[str, object]:
+        return {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self._views()
+
+    def reset(self) -> None:
+        self.x[...] = 0.0  # per axis: force, rate, acceleration
+        self._P[...] = self._P0
+
+    @property
+    def P(self) -> Vec:
+        """The covariance, (3·n, 3, 3), predicted to the last step."""
+        return self._P
+
+    @P.setter
+    def P(self, value: Vec) -> None:
+        self._P[...] = np.asarray(value, dtype=np.float64).reshape(-1, 3, 3)
+
+    def set_rotation(self, R_SP: Vec) -> None:
+        """R_SP, which `estimator_tick` turns the third channel's forces into S with."""
+        self.constants[10 + self.n : 19 + self.n] = np.asarray(R_SP, dtype=np.float64).ravel()
+
+    def set_consistency(self, constants: Vec) -> None:
+        """The consistency check's constants (`KernelConsistency.constants`)."""
+        self.constants[19 + self.n : 27 + self.n] = constants
+
+    def model(self, dt: float) -> None:
+        """The transition and process noise of a tick of `dt` (kept until dt changes)."""
+        if dt != self._dt:
+            self.constants[1:10] = axis_transition(dt).ravel()
+            self.constants[27 + self.n :] = process_noise(dt, self._q).ravel()
+            self._dt = dt
+
+    def step_bank(self, dt: float, measurements: Sequence[Vec3 | None]) -> Vec:
+        """Predict all channels, correct those with a reading (one run of channels); the forces of
+        every axis, (3·n,), a new array."""
+        self.model(dt)
+        on = [i for i, z in enumerate(measurements) if z is not None]
+        lo = hi = 0
+        if on:
+            if on != list(range(on[0], on[-1] + 1)):
+                raise ConfigError(
+                    "a compiled Kalman bank corrects one run of channels at a time, got "
+                    f"readings on channels {on}"
+                )
+            lo, hi = 3 * on[0], 3 * on[-1] + 3
+            for i in on:
+                self.z[3 * i : 3 * i + 3] = measurements[i]
+        _bank_step(self.state, self.constants, lo, hi)
+        return self.x[:, 0].copy()
+
+
+# --- the consistency check across the probe's axis (probe_correction.ContactConsistency) --------
+
+
+class KernelConsistency:
+    """`ContactConsistency`'s state as an array the fused tick updates (the mismatch in S, the
+    time of the last step, whether there was one, |mismatch|); `reset`, `mismatch` and
+    `mismatch_S` as there. `attach` makes it use a bank's state array."""
+
+    def __init__(self, params: object, p_SR_S: Vec3) -> None:
+        self.params = params
+        p_RH = np.asarray(params.handle_S) - p_SR_S  # type: ignore[attr-defined]
+        p_RT = np.asarray(params.tip_S) - p_SR_S  # type: ignore[attr-defined]
+        axis = p_RT - p_RH
+        # d (3), p_RH (3), d·d, the time constant T
+        self.constants = np.array(
+            [
+                *axis.tolist(),
+                *p_RH.tolist(),
+                float(axis @ axis),
+                params.mismatch_time_constant_s,  # type: ignore[attr-defined]
+            ]
+        )
+        self._own = np.zeros(6)
+        self._bank: KernelKalmanBank | None = None
+        self.reset()
+
+    def attach(self, bank: KernelKalmanBank) -> None:
+        """Keep the state in `bank`'s state array, where `estimator_tick` updates it."""
+        bank.set_consistency(self.constants)
+        bank.consistency_state[...] = self._own
+        self._bank = bank
+
+    @property
+    def state(self) -> Vec:
+        """mismatch_S (3), the time of the last step, 1 once there was one, |mismatch_S|."""
+        return self._own if self._bank is None else self._bank.consistency_state
+
+    def reset(self) -> None:
+        self.state[...] = 0.0
+
+    @property
+    def mismatch_S(self) -> Vec3:
+        return self.state[:3].copy()
+
+    @property
+    def mismatch(self) -> float:
+        return float(self.state[5])
+
+    def step(self, t: float, F_S: Vec3, tau_R_S: Vec3, F_probe_S: Vec3) -> float:
+        rows = np.array([F_S, tau_R_S, F_probe_S], dtype=np.float64).ravel()
+        _consistency(self.state, self.constants, t, rows)
+        return float(self.state[5])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _consistency_at(state, c, t, rows):  # pragma: no cover - compiled
+    """probe_correction.ContactConsistency.step on arrays (rows: F, τ_R, F_probe in S, 9):
+    τ' = τ_R - p_RH × F ;  F_contact,⊥ = (τ' × d) / d·d ;  F_probe,⊥ = F_probe - d (F_probe·d) / d·d ;
+    e = F_contact,⊥ - F_probe,⊥ ;  m ← m + a (e - m),  a = Δt / (T + Δt)"""
+    d0, d1, d2, h0, h1, h2, dd, T = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
+    f0, f1, f2 = rows[0], rows[1], rows[2]
+    p0, p1, p2 = rows[6], rows[7], rows[8]
+    k = (d0 * p0 + d1 * p1 + d2 * p2) / dd
+    t0 = rows[3] - (h1 * f2 - h2 * f1)
+    t1 = rows[4] - (h2 * f0 - h0 * f2)
+    t2 = rows[5] - (h0 * f1 - h1 * f0)
+    c0 = (t1 * d2 - t2 * d1) / dd
+    c1 = (t2 * d0 - t0 * d2) / dd
+    c2 = (t0 * d1 - t1 * d0) / dd
+    e0 = c0 - (p0 - d0 * k)
+    e1 = c1 - (p1 - d1 * k)
+    e2 = c2 - (p2 - d2 * k)
+    dt = t - state[3] if state[4] != 0.0 else 0.0
+    state[3] = t
+    state[4] = 1.0
+    a = dt / (T + dt) if dt > 0.0 else 0.0
+    m0 = state[0] + a * (e0 - state[0])
+    m1 = state[1] + a * (e1 - state[1])
+    m2 = state[2] + a * (e2 - state[2])
+    state[0], state[1], state[2] = m0, m1, m2
+    state[5] = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+
+
+@njit(cache=True, nogil=True)
+def _consistency(state, c, t, rows):  # pragma: no cover - compiled
+    _consistency_at(state, c, t, rows)
+
+
+# --- the estimator's tick once ready (estimator.Estimator.step) ---------------------------------
+
+
+_IN = types.Array(types.float64, 1, "A", readonly=True)
+"""An input vector of any layout, writable or not: one compiled version for every caller, never a
+compile in a running loop."""
+
+
+@njit(
+    types.void(types.float64[::1], _IN, _IN, types.float64, types.int64, types.float64[:, ::1]),
+    cache=True,
+    nogil=True,
+)
+def _estimator_tick(S, C, R_BS, t, code, in_B):  # pragma: no cover - compiled
+    """The bank's tick (`_predict_correct`: axes lo..hi-1 corrected, code = lo + 16 hi + 256 check),
+    the filtered forces into in_S (rows F_hand, τ_hand, F_probe = R_SP F_P, in S; the fourth row,
+    the held measurement, is the caller's), the consistency check if asked, and the four rows turned
+    into B: row_B = row_S R_BSᵀ (R_BS row by row, 9 values), written into `in_B` (4, 3): a new
+    array made by the caller (a compiled function's own new array costs twice as much to return)."""
+    lo, hi, check = code % 16, (code // 16) % 16, code >= 256
+    _predict_correct(S, C, lo, hi)
+    n = int(C[0])
+    R_SP = C[10 + n : 19 + n]
+    at = 13 * n  # in_S
+    for i in range(3):
+        S[at + i] = S[3 * i]
+        S[at + 3 + i] = S[9 + 3 * i]
+    f0, f1, f2 = S[18], S[21], S[24]
+    for i in range(3):
+        S[at + 6 + i] = R_SP[3 * i] * f0 + R_SP[3 * i + 1] * f1 + R_SP[3 * i + 2] * f2
+    if check:
+        _consistency_at(S[at + 12 : at + 18], C[19 + n : 27 + n], t, S[at : at + 9])
+    for k in range(4):
+        s0, s1, s2 = S[at + 3 * k], S[at + 3 * k + 1], S[at + 3 * k + 2]
+        for i in range(3):
+            in_B[k, i] = R_BS[3 * i] * s0 + R_BS[3 * i + 1] * s1 + R_BS[3 * i + 2] * s2
+
+
+def estimator_tick(
+    bank: KernelKalmanBank,
+    dt: float,
+    ft_z: Vec | None,
+    probe_z: Vec3 | None,
+    R_BS: Vec,
+    t: float,
+    check: bool,
+) -> Vec:
+    """One ready tick of the estimator's arithmetic in one compiled call; the four rows of the
+    bank's `in_S` in B, a new (4, 3) array. `ft_z`: the compensated wrench (6) of a new FT-150
+    packet or None; `probe_z`: the corrected force (3) of a new probe packet or None; `check`: step
+    the consistency check (attached to the bank). A bank of three channels (9 axes)."""
+    if dt != bank._dt:
+        bank.model(dt)
+    lo, hi = 9, 0  # the axes corrected: lo..hi-1
+    if ft_z is not None:
+        bank.z[:6] = ft_z
+        lo, hi = 0, 6
+    if probe_z is not None:
+        bank.z[6:9] = probe_z
+        lo, hi = min(lo, 6), 9
+    code = lo + 16 * hi
+    in_B = np.empty((4, 3))
+    _estimator_tick(bank.state, bank.constants, R_BS, t, code + 256 * check, in_B)
+    return in_B
+
+
+# --- the baseline filters (baselines.ButterworthFilter, baselines.OneEuroFilter) ----------------
+#
+# The estimator runs three of one kind (hand force, hand torque, probe force); compiled, the three
+# are one bank stepped in one call, like the Kalman bank.
+
+
+@njit(cache=True, nogil=True)
+def _butterworth(sections, zi, held, on, out):  # pragma: no cover - compiled
+    """One sample of every axis that has had a packet (on[a] = 1) through the second-order sections
+    (b0, b1, b2, a1, a2), transposed direct form II as scipy's `sosfilt`, the same operations in the
+    same order (the others give 0):
+    y = b0 x + s0 ;  s0 ← b1 x - a1 y + s1 ;  s1 ← b2 x - a2 y ;  x ← y   (each section)"""
+    for a in range(held.shape[0]):
+        if on[a] == 0.0:
+            out[a] = 0.0
+            continue
+        x = held[a]
+        for k in range(sections.shape[0]):
+            y = sections[k, 0] * x + zi[a, k, 0]
+            zi[a, k, 0] = sections[k, 1] * x - sections[k, 3] * y + zi[a, k, 1]
+            zi[a, k, 1] = sections[k, 2] * x - sections[k, 4] * y
+            x = y
+        out[a] = x
+
+
+class KernelButterworthBank:
+    """Three-axis `ButterworthFilter`s, one per channel, compiled as one bank: the same design
+    (scipy's, at the first step), the same steady start at each channel's first packet, the same
+    numbers."""
+
+    def __init__(self, filters: Sequence[ButterworthFilter]) -> None:
+        self.filters = tuple(filters)  # the designs (pure objects: never stepped)
+        self.n = 3 * len(self.filters)
+        self._dt = math.nan
+        self.reset()
+
+    def reset(self) -> None:
+        self._held = np.zeros(self.n)
+        self._on = np.zeros(self.n)  # 1 on the axes of a channel that has had a packet
+        self._zi: Vec | None = None if math.isnan(self._dt) else np.zeros_like(self._zi)
+
+    def step_bank(self, dt: float, measurements: Sequence[Vec | None]) -> Vec:
+        if dt != self._dt:
+            if not math.isnan(self._dt):
+                raise ConfigError(f"dt: the filter was designed for {self._dt} s, got {dt} s")
+            first = self.filters[0]
+            first._design(dt)
+            for f in self.filters[1:]:
+                if f.params != first.params:
+                    raise ConfigError("a compiled Butterworth bank needs one design")
+            self._sections = np.array(first._sections, dtype=np.float64)
+            self._unit = np.array(first._zi_unit, dtype=np.float64)
+            self._zi = np.zeros((self.n, len(first._sections), 2))
+            self._dt = dt
+        for c, z in enumerate(measurements):
+            if z is not None:
+                axes = slice(3 * c, 3 * c + 3)
+                self._held[axes] = z
+                if self._on[3 * c] == 0.0:  # the steady state for the channel's first packet
+                    self._zi[axes] = self._held[axes, np.newaxis, np.newaxis] * self._unit
+                    self._on[axes] = 1.0
+        out = np.empty(self.n)
+        _butterworth(self._sections, self._zi, self._held, self._on, out)
+        return out
+
+
+@njit(cache=True, nogil=True)
+def _one_euro(x_hat, dx_hat, since, started, z, on, dt, c, out):  # pragma: no cover - compiled
+    """Every channel's `OneEuroFilter` step (3 axes a channel): `since` += dt; on a packet
+    (on[channel] = 1) the first initialises x̂ = z, the others, with rate = 1 / since and
+    c[channel] = (min_cutoff, β, d_cutoff):
+    dx = (z - x̂) rate ;  dx̂ ← dx̂ + α(rate, d_cutoff) (dx - dx̂) ;  fc = min_cutoff + β |dx̂| ;
+    x̂ ← x̂ + α(rate, fc) (z - x̂) ;  α(rate, fc) = 1 / (1 + τ rate), τ = 1 / (2π fc);
+    then `since` = 0. x̂ into `out`."""
+    for ch in range(since.shape[0]):
+        since[ch] += dt
+        if on[ch] != 0.0:
+            if started[ch] == 0.0:
+                for i in range(3 * ch, 3 * ch + 3):
+                    x_hat[i] = z[i]
+                started[ch] = 1.0
+            else:
+                rate = 1.0 / since[ch]
+                tau_d = 1.0 / (2.0 * math.pi * c[ch, 2])
+                alpha_d = 1.0 / (1.0 + tau_d * rate)
+                for i in range(3 * ch, 3 * ch + 3):
+                    dx = (z[i] - x_hat[i]) * rate
+                    dx_hat[i] = dx_hat[i] + alpha_d * (dx - dx_hat[i])
+                    tau = 1.0 / (2.0 * math.pi * (c[ch, 0] + c[ch, 1] * abs(dx_hat[i])))
+                    alpha = 1.0 / (1.0 + tau * rate)
+                    x_hat[i] = x_hat[i] + alpha * (z[i] - x_hat[i])
+            since[ch] = 0.0
+    for i in range(x_hat.shape[0]):
+        out[i] = x_hat[i]
+
+
+class KernelOneEuroBank:
+    """Three-axis `OneEuroFilter`s, one per channel with its own tuning, compiled as one bank."""
+
+    def __init__(self, filters: Sequence[OneEuroFilter]) -> None:
+        self.filters = tuple(filters)
+        self._c = np.array(
+            [[f.params.min_cutoff_hz, f.params.beta, f.params.d_cutoff_hz] for f in filters]
+        )
+        self._z = np.zeros(3 * len(self.filters))
+        self._on = np.zeros(len(self.filters))
+        self.reset()
+
+    def reset(self) -> None:
+        n = len(self.filters)
+        self._x_hat, self._dx_hat = np.zeros(3 * n), np.zeros(3 * n)
+        self._since, self._started = np.zeros(n), np.zeros(n)
+
+    def step_bank(self, dt: float, measurements: Sequence[Vec | None]) -> Vec:
+        on = self._on
+        for c, z in enumerate(measurements):
+            if z is None:
+                on[c] = 0.0
+            else:
+                on[c] = 1.0
+                self._z[3 * c : 3 * c + 3] = z
+        out = np.empty(self._x_hat.size)
+        _one_euro(
+            self._x_hat, self._dx_hat, self._since, self._started, self._z, on, dt, self._c, out
+        )
+        return out
+
+
+def compiled_bank(filters: Sequence[object]) -> KernelButterworthBank | KernelOneEuroBank | None:
+    """The compiled bank of these three-axis filters if they are all of one compiled kind (and the
+    Butterworth filters of one design), else None."""
+    if filters and all(
+        type(f) is ButterworthFilter and f.size == 3 and f.params == filters[0].params  # type: ignore[attr-defined]
+        for f in filters
+    ):
+        return KernelButterworthBank(filters)  # type: ignore[arg-type]
+    if filters and all(type(f) is OneEuroFilter and f.size == 3 for f in filters):
+        return KernelOneEuroBank(filters)  # type: ignore[arg-type]
+    return None
+
+
+_warm = False
+
+
+def warm_up() -> None:
+    """Load (or compile) the control kernels now, with the argument types the blocks use (once
+    per process; the blocks call it when they are built)."""
+    global _warm
+    if _warm:
+        return
+    _warm = True
+    from hoh_cosim.control.baselines import ButterworthParams, OneEuroParams
+    from hoh_cosim.control.probe_correction import ProbeCorrectionParams
+
+    bank = KernelKalmanBank([KalmanParams(q=[1.0] * 3, r=[1.0] * 3)] * 3)
+    bank.step_bank(1e-3, (np.zeros(3), None, None))
+    cons = KernelConsistency(ProbeCorrectionParams(), np.zeros(3))
+    cons.step(0.0, np.zeros(3), np.zeros(3), np.zeros(3))
+    cons.attach(bank)
+    bank.set_rotation(np.eye(3))
+    estimator_tick(bank, 1e-3, np.zeros(6), np.zeros(3), np.zeros(9), 0.0, True)
+    euro = KernelOneEuroBank([OneEuroFilter(OneEuroParams())] * 3)
+    for _ in range(2):
+        euro.step_bank(1e-3, (np.zeros(3), None, np.zeros(3)))
+    KernelButterworthBank([ButterworthFilter(ButterworthParams())] * 3).step_bank(
+        1e-3, (np.zeros(3), None, None)
+    )

@@ -1,0 +1,311 @@
+"""The compiled kernels against their pure references: the Kalman bank, the estimator, the UR5's
+kinematics (pinocchio) and the plant, within 1e-12 relative on varied and recorded inputs."""
+
+from __future__ import annotations
+
+import copy
+import importlib
+import io
+import math
+import pickle
+import types
+
+import numpy as np
+import pytest
+
+from hoh_cosim.control import kernels
+from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.frames import rotvec_to_matrix
+from hoh_cosim.control.gravity import ToolParams
+from hoh_cosim.control.kalman import KalmanBank, KalmanParams
+from hoh_cosim.control.kernels import KernelKalmanBank, kernels_enabled, use_kernels
+from hoh_cosim.control.probe_correction import ProbeCorrectionParams
+from hoh_cosim.errors import ConfigError
+from plant_models.kernels import KINEMATICS_LAYOUT, KernelUR5
+from plant_models.plant import Plant, PlantParams
+from plant_models.tool import CableDrag, ToolModel
+from tests.streams import SensorStream
+
+REL = 1e-12
+
+
+class Agreement:
+    """The largest |a - b| / scale over a run, per signal, with each signal's scale its largest
+    |value| in the reference over the run (at least `floor`): relative agreement of whole signals,
+    which a value crossing zero does not make meaningless."""
+
+    def __init__(self, floor: float = 1e-9) -> None:
+        self.floor = floor
+        self.diff: dict[str, float] = {}
+        self.scale: dict[str, float] = {}
+
+    def add(self, name: str, reference: np.ndarray, other: np.ndarray) -> None:
+        reference, other = np.asarray(reference, float), np.asarray(other, float)
+        same_nan = np.isnan(reference) & np.isnan(other)
+        diff = np.where(same_nan, 0.0, np.abs(reference - other))
+        finite = np.where(np.isfinite(reference), np.abs(reference), 0.0)
+        self.diff[name] = max(self.diff.get(name, 0.0), float(np.max(diff, initial=0.0)))
+        self.scale[name] = max(self.scale.get(name, self.floor), float(np.max(finite, initial=0.0)))
+
+    def worst(self) -> tuple[str, float]:
+        name = max(self.diff, key=lambda k: self.diff[k] / self.scale[k])
+        return name, self.diff[name] / self.scale[name]
+
+
+def _pure_and_compiled(make):
+    with use_kernels(False):
+        pure = make()
+    with use_kernels(True):
+        compiled = make()
+    return pure, compiled
+
+
+def test_the_switch_reads_the_environment_and_names_a_bad_value(monkeypatch):
+    monkeypatch.setattr(kernels, "_enabled", None)
+    monkeypatch.setenv("HOH_COSIM_KERNELS", "pure")
+    assert not kernels_enabled()
+    monkeypatch.setattr(kernels, "_enabled", None)
+    monkeypatch.setenv("HOH_COSIM_KERNELS", "fast")
+    with pytest.raises(ConfigError, match=r"HOH_COSIM_KERNELS: expected one of compiled, pure, "):
+        kernels_enabled()
+    monkeypatch.setattr(kernels, "_enabled", None)
+    monkeypatch.delenv("HOH_COSIM_KERNELS")
+    assert kernels_enabled()
+
+
+def test_blocks_take_the_path_the_switch_says():
+    pure, compiled = _pure_and_compiled(Estimator)
+    assert isinstance(pure._filters, KalmanBank)
+    assert isinstance(compiled._filters, KernelKalmanBank)
+    pure, compiled = _pure_and_compiled(Plant)
+    assert pure._kernel is None
+    assert isinstance(compiled._kernel, KernelUR5)
+
+
+@pytest.mark.parametrize("dt", [1e-3, 2e-3, 8e-3])
+def test_kalman_bank_matches_the_pure_bank(dt):
+    rng = np.random.default_rng(3)
+    channels = [
+        KalmanParams(q=rng.uniform(1, 1e4, 3), r=rng.uniform(1e-3, 1.0, 3)) for _ in range(3)
+    ]
+    pure, compiled = KalmanBank(channels), KernelKalmanBank(channels)
+    # readings on one run of channels at a time: none, the first two (a wrist packet), the last
+    # (a probe packet), all three
+    patterns = [(False, False, False), (True, True, False), (False, False, True), (True,) * 3]
+    agree = Agreement()
+    for k in range(3000):
+        pattern = patterns[rng.integers(4)] if k % 3 == 0 else patterns[0]
+        z = [rng.normal(5.0, 2.0, 3) if on else None for on in pattern]
+        agree.add("forces", pure.step_bank(dt, z), compiled.step_bank(dt, z))
+        agree.add("x", pure.x, compiled.x)
+        if k % 97 == 0:
+            agree.add("P", pure.P, compiled.P)
+        if k == 1500:
+            pure.reset()
+            compiled.reset()
+    name, worst = agree.worst()
+    assert worst < REL, f"{name}: {worst:.3g}"
+    compiled.step_bank(dt, (np.ones(3), None, None))  # after a correction, symmetric to the bit
+    np.testing.assert_array_equal(compiled.P, np.swapaxes(compiled.P, 1, 2))
+
+
+def test_the_compiled_bank_refuses_readings_that_are_not_one_run_of_channels():
+    bank = KernelKalmanBank([KalmanParams(q=[1.0] * 3, r=[1.0] * 3)] * 3)
+    with pytest.raises(ConfigError, match=r"one run of channels at a time, got readings on .*0, 2"):
+        bank.step_bank(1e-3, (np.zeros(3), None, np.zeros(3)))
+
+
+def _stream(seed: int) -> SensorStream:
+    return SensorStream(
+        R_BS=lambda t: (
+            rotvec_to_matrix([0.3 * math.sin(t), -0.2 * math.cos(0.7 * t), 0.1 * t])
+            @ rotvec_to_matrix([math.pi, 0.0, 0.0])
+        ),
+        hand_B=lambda t: np.array([4.0 * math.sin(2 * t), 3.0 * math.cos(1.3 * t), -1.0]),
+        hand_torque_B=lambda t: np.array([0.1 * math.sin(t), 0.05, -0.2 * math.cos(3 * t)]),
+        contact_B=lambda t: np.array([0.0, 0.5 * math.sin(t), 6.0 + 2.0 * math.sin(0.5 * t)]),
+        ft_sigma=np.array([0.3, 0.3, 0.1, 0.01, 0.01, 0.01]),
+        probe_sigma=np.array([0.05, 0.05, 0.05]),
+        seed=seed,
+    )
+
+
+CONFIGURATIONS = {
+    "default": {},
+    "no_probe": {"use_probe": False},
+    "lever_and_probe_mass": {"p_SR_S": [0.01, -0.02, -0.09], "probe_mass_kg": 0.05},
+    "probe_check_online": {
+        "probe_correction": ProbeCorrectionParams(kind="online", check_s=0.3),
+        "tool": ToolParams(0.5, [-0.01, 0.0, -0.07]),
+    },
+    "butterworth": {"filter": "butterworth"},
+    "one_euro": {"filter": "one_euro"},
+    "given_bias": {
+        "ft_rebias_packets": 0,
+        "probe_rebias_packets": 0,
+        "ft_bias": [1.0, -2.0, 0.5, 0.02, -0.01, 0.03],
+        "probe_bias": [0.3, 0.1, -0.2],
+    },
+}
+
+
+@pytest.mark.parametrize("dt", [1e-3, 2e-3])
+@pytest.mark.parametrize("config", sorted(CONFIGURATIONS))
+def test_estimator_matches_the_pure_estimator(config, dt):
+    """Both paths on the same packets: noise, a tool that turns, NaN packets, a new rebias, a
+    reset, and copies (pickle, deepcopy: an FMU's state) that carry on in place of the originals."""
+    params = EstimatorParams(
+        **{"ft_rebias_packets": 20, "probe_rebias_packets": 10, **CONFIGURATIONS[config]}
+    )
+    pure, compiled = _pure_and_compiled(lambda: Estimator(params))
+    if params.filter == "kalman":
+        assert compiled._kernel
+    else:
+        assert type(compiled._filters).__name__.startswith("Kernel")
+    stream = _stream(seed=7)
+    stream.dt = dt
+    agree = Agreement()
+    n = round(4.0 / dt)
+    for k, (t, inputs) in enumerate(stream.ticks(n)):
+        if k in (n // 5, n // 5 + 3):  # a NaN in a wrist packet, then in a probe packet
+            inputs["wrench_S"][2] = math.nan
+            inputs["force_P"][0] = math.nan
+        if k == n // 3:
+            pure.start_rebias()
+            compiled.start_rebias()
+        if k == n // 2:
+            pure, compiled = pickle.loads(pickle.dumps(pure)), pickle.loads(pickle.dumps(compiled))
+        if k == 2 * n // 3:
+            pure, compiled = copy.deepcopy(pure), copy.deepcopy(compiled)
+        if k == 5 * n // 6:
+            pure.reset()
+            compiled.reset()
+        a, b = pure.step(t, dt, inputs), compiled.step(t, dt, inputs)
+        assert a.keys() == b.keys()
+        for name in a:
+            agree.add(name, a[name], b[name])
+    name, worst = agree.worst()
+    assert worst < REL, f"{config}, {name}: {worst:.3g}"
+    # the run did what it is meant to exercise
+    assert compiled.rejected_packets == 0  # counted since the reset
+    assert agree.scale["F_hand_B"] > 1.0
+    if params.use_probe:
+        assert agree.scale["rejected_packets"] >= 2.0
+        assert agree.scale["F_probe_B"] > 1.0
+        assert agree.scale["probe_mismatch"] > 0.0
+
+
+def test_a_wrong_kernel_would_be_caught():
+    """The agreement test can fail: a compiled estimator whose probe sensor is mounted otherwise
+    (R_SP turned by 1e-9 rad) is told apart from the pure one."""
+    params = EstimatorParams(ft_rebias_packets=20, probe_rebias_packets=10)
+    pure, compiled = _pure_and_compiled(lambda: Estimator(params))
+    compiled._filters.set_rotation(rotvec_to_matrix([1e-9, 0.0, 0.0]) @ params.R_SP)
+    agree = Agreement()
+    for t, inputs in _stream(seed=1).ticks(1500):
+        a, b = pure.step(t, 1e-3, inputs), compiled.step(t, 1e-3, inputs)
+        agree.add("F_probe_B", a["F_probe_B"], b["F_probe_B"])
+    assert agree.worst()[1] > 100 * REL
+
+
+class _ByName(pickle.Pickler):
+    """As an FMU's state is pickled (hoh_cosim.fmi.slave): a module (pinocchio) by its name."""
+
+    def persistent_id(self, obj):
+        return obj.__name__ if isinstance(obj, types.ModuleType) else None
+
+
+class _Import(pickle.Unpickler):
+    def persistent_load(self, pid):
+        return importlib.import_module(pid)
+
+
+def _copy_as_fmu_state(block):
+    buffer = io.BytesIO()
+    _ByName(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(block)
+    return _Import(io.BytesIO(buffer.getvalue())).load()
+
+
+def _frames_model():
+    return Plant().model  # the UR5 with the default tool's frames (pinocchio)
+
+
+def test_ur5_kinematics_match_pinocchio():
+    model = _frames_model()
+    kernel = KernelUR5(model)
+    rng = np.random.default_rng(11)
+    entries = [3, 7, 11, 0, 1, 2, 4, 5, 6, 8, 9, 10]  # p, then R row by row
+    agree = Agreement(floor=1.0)
+    for _ in range(300):
+        q, qd, qdd = rng.uniform(-6, 6, 6), rng.uniform(-3, 3, 6), rng.uniform(-20, 20, 6)
+        model.update(q, qd, qdd)
+        k = kernel.tool_kinematics(q, qd, qdd)
+        L = KINEMATICS_LAYOUT
+        agree.add("pose_T", model.homogeneous("tcp").take(entries), k[L["pose_T"]])
+        agree.add("pose_S", model.homogeneous("ft_sensor").take(entries), k[L["pose_S"]])
+        agree.add("twist_T", model.twist("tcp"), k[L["twist_T"]])
+        agree.add("accel_C", model.acceleration("tool_com"), k[L["accel_C"]])
+        agree.add("accel_P", model.acceleration("probe_sensor")[:3], k[L["accel_P"]])
+        for frame in model.frame_ids:
+            agree.add(f"J {frame}", model.jacobian(q, frame), kernel.jacobian(q, frame))
+    name, worst = agree.worst()
+    assert worst < REL, f"{name}: {worst:.3g}"
+
+
+def test_plant_matches_the_pinocchio_plant():
+    """Both plants under the same commands and loads (a moving arm, a cable, a probe mass, the
+    phantom touched), and copies that carry on in place of the originals."""
+    params = PlantParams(tool=ToolModel(probe_mass_kg=0.05, cable=CableDrag(enabled=True)))
+    pure, compiled = _pure_and_compiled(lambda: Plant(params))
+    rng = np.random.default_rng(5)
+    agree = Agreement()
+    command = np.zeros(6)
+    for k in range(4000):
+        t = k * 1e-3
+        if k % 8 == 0:
+            command = np.concatenate([rng.normal(0, 0.05, 3), rng.normal(0, 0.2, 3)])
+            command[2] = -0.04  # down, into the phantom
+        inputs = {
+            "twist_cmd_B": command,
+            "F_hand_B": rng.normal(0, 3, 3),
+            "tau_hand_B": rng.normal(0, 0.2, 3),
+            "F_tip_B": np.zeros(3) if k % 500 < 250 else rng.normal(0, 1, 3),
+        }
+        if k == 2000:
+            pure, compiled = _copy_as_fmu_state(pure), _copy_as_fmu_state(compiled)
+        a, b = pure.step(t, 1e-3, inputs), compiled.step(t, 1e-3, inputs)
+        for name in a:
+            agree.add(name, a[name], b[name])
+    name, worst = agree.worst()
+    assert worst < REL, f"{name}: {worst:.3g}"
+    assert agree.scale["qd"] > 0.01  # the arm moved
+
+
+def test_warm_up_is_idempotent():
+    kernels.warm_up()
+    kernels.warm_up()
+    assert kernels._warm
+
+
+def test_the_arm_cycles_small_solvers_match_lapack():
+    """The compiled cycle's σ_min/σ_max (one-sided Jacobi) and solve (LU, partial pivoting) against
+    numpy's LAPACK, on random and nearly singular 6x6 matrices."""
+    from plant_models.kernels import _singular_extremes, _solve
+
+    rng = np.random.default_rng(2)
+    worst_sigma = worst_solve = 0.0
+    for k in range(500):
+        J = rng.normal(size=(6, 6))
+        if k % 2:  # σ_min from 1e-6 to 0.1 of the others
+            U, s, Vt = np.linalg.svd(J)
+            s[-1] = 10.0 ** rng.uniform(-6, -1)
+            J = U @ np.diag(s) @ Vt
+        s = np.linalg.svd(J, compute_uv=False)
+        lo, hi = _singular_extremes(J)
+        worst_sigma = max(worst_sigma, abs(lo - s[-1]) / s[0], abs(hi - s[0]) / s[0])
+        b = rng.normal(size=6)
+        x = np.linalg.solve(J, b)
+        error = np.max(np.abs(_solve(J, b) - x)) / np.max(np.abs(x))
+        worst_solve = max(worst_solve, error / (s[0] / s[-1]))  # relative to the condition
+    assert worst_sigma < REL
+    assert worst_solve < REL
