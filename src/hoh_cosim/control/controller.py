@@ -7,9 +7,11 @@ Per tick:
                                                                   → any of these: zero twist, stop flag
     law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on); v = law(F̃) (eq. 10 or
                an alternative), ω = law(τ_hand)
+    release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at
+               `max_brake_accel`, until the hand pushes again
     fixture    while |F_probe| > threshold no upward motion (3.F.3, if on)
-    limits     the supervisor's `limit_command`: speed clamp · acceleration clamp · probe-force
-               soft cap · workspace box
+    limits     the supervisor's `limit_command`: speed clamp · acceleration clamp (the braking
+               deceleration towards rest after a release) · probe-force soft cap · workspace box
 
 The order puts the hard limits last: the soft force cap and the workspace box override the
 acceleration clamp, never the other way round. The output is a TCP twist [v; ω] in the base frame with
@@ -34,6 +36,7 @@ from hoh_cosim.control.admittance import (
     horizontal_fixture,
 )
 from hoh_cosim.control.block import TWIST_UNITS, Port
+from hoh_cosim.control.release import ReleaseDetector, ReleaseParams
 from hoh_cosim.control.supervisor import (
     LATCHED_FLAGS,
     STOP_FLAGS,
@@ -47,6 +50,8 @@ from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, froz
 __all__ = ["ControllerParams", "HandGuidingController"]
 
 _FIXTURE = int(Status.FIXTURE)
+_RELEASED = int(Status.RELEASED)
+_BRAKING = int(Status.BRAKING)
 _LATCHED = int(LATCHED_FLAGS)
 _STOP = int(STOP_FLAGS)
 
@@ -73,6 +78,7 @@ class ControllerParams:
             "fixture_threshold_N",
             "fixture_up_B",
             "limits",
+            "release",
         }
     )
 
@@ -83,6 +89,7 @@ class ControllerParams:
     fixture_threshold_N: float = 1.0  # [N] contact force that engages the fixture
     fixture_up_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 1.0]))  # unit, in B
     limits: LimitParams = field(default_factory=LimitParams)
+    release: ReleaseParams = field(default_factory=ReleaseParams)  # release detection, brake
     use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
     ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
@@ -111,6 +118,7 @@ class HandGuidingController:
         Port("probe_age", 1, "s", "time since the last probe-sensor packet"),
         Port("ready", 1, "1", "1 when the estimator's outputs are valid"),
         Port("p_BT_B", 3, "m", "measured TCP position in the base frame"),
+        Port("F_hand_meas_B", 3, "N", "newest compensated, unfiltered wrist force, in B (held)"),
     )
     outputs: ClassVar[tuple[Port, ...]] = (
         Port(
@@ -132,6 +140,12 @@ class HandGuidingController:
             "Status flags of this tick (hoh_cosim.control.supervisor.Status)",
             flags=Status,
         ),
+        Port(
+            "brake_accel",
+            1,
+            "m/s2",
+            "speedL's acceleration while braking to rest after a release, 0 otherwise",
+        ),
     )
 
     def __init__(self, params: ControllerParams | None = None) -> None:
@@ -141,6 +155,8 @@ class HandGuidingController:
     def retune(self, params: ControllerParams) -> None:
         """New parameters without losing the state (latched stops, the last command)."""
         self.params = params
+        if hasattr(self, "_release"):
+            self._release.params = params.release
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
         tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None
@@ -157,6 +173,12 @@ class HandGuidingController:
         self._bits = 0
         self._v_prev = np.zeros(3)
         self._w_prev = np.zeros(3)
+        self._release = ReleaseDetector(self.params.release)
+
+    @property
+    def release(self) -> ReleaseDetector:
+        """The release detector and its state (phase, time of the last release)."""
+        return self._release
 
     @property
     def status(self) -> Status:
@@ -178,10 +200,12 @@ class HandGuidingController:
             self._v_prev = np.zeros(3)
             self._w_prev = np.zeros(3)
             self._bits = status
+            self._release.reset()
             return {
                 "twist_B": np.zeros(6),
                 "twist_law_B": np.zeros(6),
                 "status": np.array([float(status)]),
+                "brake_accel": _NO_BRAKE,
             }
 
         F_probe = inputs["F_probe_B"]
@@ -195,6 +219,23 @@ class HandGuidingController:
             v = apply_law(F, p.translation)
             w = apply_law(inputs["tau_hand_B"], p.rotation)
             twist_law = np.concatenate([v, w])
+
+        braking = False
+        if p.release.enabled or self._release.released:
+            F_raw = inputs.get("F_hand_meas_B")
+            if F_raw is not None and p.use_probe and p.contact_compensation:
+                F_raw = contact_compensated(F_raw, F_probe)
+            braking = self._release.step(
+                t,
+                F,
+                F_raw,
+                p.translation.deadband,
+                bool(twist_law.any()),
+                F_probe if p.use_probe else None,
+            )
+            if braking:
+                v, w = _ZERO3, _ZERO3
+                status |= _RELEASED
 
         if p.use_probe and p.virtual_fixture:
             v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, p.fixture_up_B)
@@ -210,6 +251,7 @@ class HandGuidingController:
             inputs["p_BT_B"],
             lim,
             self._box,
+            braking=braking,
         )
         status |= clamped
 
@@ -219,7 +261,12 @@ class HandGuidingController:
             "twist_B": np.concatenate([v, w]),
             "twist_law_B": twist_law,
             "status": np.array([float(status)]),
+            "brake_accel": np.array([lim.max_brake_accel]) if braking else _NO_BRAKE,
         }
+
+
+_ZERO3 = frozen(np.zeros(3))
+_NO_BRAKE = frozen([0.0])
 
 
 def _stack_gains(tr: AdmittanceGains, rot: AdmittanceGains) -> AdmittanceGains:
