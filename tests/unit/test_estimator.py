@@ -189,7 +189,7 @@ def test_start_rebias_takes_a_new_offset():
     [
         (
             {"filter": "median"},
-            r"filter: expected one of kalman, steady_kalman, butterworth, "
+            r"filter: expected one of kalman, steady_kalman, lead_lowpass, butterworth, "
             r"one_euro, none, got 'median'",
         ),
         ({"ft_rebias_packets": -1}, r"ft_rebias_packets must be an integer >= 0, got -1"),

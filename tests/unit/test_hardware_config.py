@@ -426,7 +426,8 @@ BAD_CONFIGS = [
     ),
     pytest.param(
         "robot: {host: h}\nprobe: null\nestimator: {filter: median}\n",
-        "estimator.filter: expected one of kalman, steady_kalman, butterworth, one_euro, none, "
+        "estimator.filter: expected one of kalman, steady_kalman, lead_lowpass, butterworth, "
+        "one_euro, none, "
         "got 'median'",
         id="estimator-value-rejected",
     ),

@@ -6,7 +6,10 @@ Per tick:
                stale FT-150 or probe data · probe force at the stop limit (latched)
                                                                   → any of these: zero twist, stop flag
     law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on); v = law(F̃) (eq. 10 or
-               an alternative), ω = law(τ_hand)
+               an alternative: `variable` adapts eq. 10's slope to the hand's intent), ω = law(τ_hand)
+    passivity  the passivity observer and controller with its energy tank
+               (`hoh_cosim.control.passivity`, if on): the command yields to the hand when the
+               robot has given back more energy than it took
     release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at
                `max_brake_accel`, until the hand pushes again
     fixture    while |F_probe| > threshold no upward motion (3.F.3, if on)
@@ -36,6 +39,7 @@ from hoh_cosim.control.admittance import (
     horizontal_fixture,
 )
 from hoh_cosim.control.block import TWIST_UNITS, Port
+from hoh_cosim.control.passivity import PassivityController, PassivityParams
 from hoh_cosim.control.release import ReleaseDetector, ReleaseParams
 from hoh_cosim.control.supervisor import (
     LATCHED_FLAGS,
@@ -45,6 +49,7 @@ from hoh_cosim.control.supervisor import (
     check_inputs,
     limit_command,
 )
+from hoh_cosim.control.variable_admittance import VariableAdmittance, VariableAdmittanceParams
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, frozen
 
 __all__ = ["ControllerParams", "HandGuidingController"]
@@ -52,6 +57,7 @@ __all__ = ["ControllerParams", "HandGuidingController"]
 _FIXTURE = int(Status.FIXTURE)
 _RELEASED = int(Status.RELEASED)
 _BRAKING = int(Status.BRAKING)
+_PASSIVITY = int(Status.PASSIVITY)
 _LATCHED = int(LATCHED_FLAGS)
 _STOP = int(STOP_FLAGS)
 
@@ -79,6 +85,8 @@ class ControllerParams:
             "fixture_up_B",
             "limits",
             "release",
+            "variable",
+            "passivity",
         }
     )
 
@@ -90,6 +98,8 @@ class ControllerParams:
     fixture_up_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 1.0]))  # unit, in B
     limits: LimitParams = field(default_factory=LimitParams)
     release: ReleaseParams = field(default_factory=ReleaseParams)  # release detection, brake
+    variable: VariableAdmittanceParams = field(default_factory=VariableAdmittanceParams)
+    passivity: PassivityParams = field(default_factory=PassivityParams)
     use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
     ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
@@ -157,10 +167,12 @@ class HandGuidingController:
         self.params = params
         if hasattr(self, "_release"):
             self._release.params = params.release
+            self._variable.params = params.variable
+            self._passivity.params = params.passivity
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
         tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None
-        if tr.law == rot.law and tr.law != "isotropic":
+        if tr.law == rot.law and tr.law not in ("isotropic", "variable"):
             self._law6 = _stack_gains(tr, rot)
         self._box = (
             params.limits.workspace_min_B.tolist(),
@@ -174,6 +186,8 @@ class HandGuidingController:
         self._v_prev = np.zeros(3)
         self._w_prev = np.zeros(3)
         self._release = ReleaseDetector(self.params.release)
+        self._variable = VariableAdmittance(self.params.variable)
+        self._passivity = PassivityController(self.params.passivity)
 
     @property
     def release(self) -> ReleaseDetector:
@@ -201,6 +215,8 @@ class HandGuidingController:
             self._w_prev = np.zeros(3)
             self._bits = status
             self._release.reset()
+            self._variable.reset()
+            self._passivity.reset()
             return {
                 "twist_B": np.zeros(6),
                 "twist_law_B": np.zeros(6),
@@ -216,7 +232,10 @@ class HandGuidingController:
             twist_law = apply_law(np.concatenate([F, inputs["tau_hand_B"]]), self._law6)
             v, w = twist_law[:3], twist_law[3:]
         else:
-            v = apply_law(F, p.translation)
+            if p.translation.law == "variable":
+                v = self._variable.step(t, F, p.translation.slope, p.translation.deadband)
+            else:
+                v = apply_law(F, p.translation)
             w = apply_law(inputs["tau_hand_B"], p.rotation)
             twist_law = np.concatenate([v, w])
 
@@ -236,6 +255,13 @@ class HandGuidingController:
             if braking:
                 v, w = _ZERO3, _ZERO3
                 status |= _RELEASED
+
+        if p.passivity.enabled:
+            dt_po = self._passivity.observe(t, F, inputs["p_BT_B"])
+            if not braking:
+                v, acted = self._passivity.control(v, F, dt_po)
+                if acted:
+                    status |= _PASSIVITY
 
         if p.use_probe and p.virtual_fixture:
             v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, p.fixture_up_B)
