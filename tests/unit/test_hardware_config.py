@@ -631,7 +631,8 @@ BAD_OVERRIDES = [
     ),
     pytest.param(
         "estimator.filter=median",
-        "--set estimator.filter: expected one of kalman, steady_kalman, butterworth, one_euro, "
+        "--set estimator.filter: expected one of kalman, steady_kalman, lead_lowpass, butterworth, "
+        "one_euro, "
         "none, got 'median'",
         id="estimator-value-rejected",
     ),
