@@ -96,3 +96,30 @@ def test_the_controller_flags_the_passivity_controller():
         )
         flags |= int(out["status"][0])
     assert flags & int(Status.PASSIVITY)
+
+
+def _watch_run(position, seconds=6.0):
+    law = VariableAdmittance()
+    F = np.array([3.0, 0.0, 0.0])
+    for k in range(int(seconds / DT)):
+        t = k * DT
+        law.step(t, F, SLOPE, ETA, np.array(position(t)))
+    return law
+
+
+def test_an_oscillation_lowers_the_slope_and_a_circle_does_not():
+    """The oscillation watch: 40 mm/s at 2 Hz (a stiff hand's oscillation) takes the slope down;
+    a 4 cm circle every 4 s (63 mm/s at 0.25 Hz) leaves it at 1."""
+    w = 2 * np.pi * 2.0
+    shaky = _watch_run(lambda t: [0.04 / w * np.sin(w * t), 0.0, 0.3])
+    assert shaky.oscillation_m_s > shaky.params.oscillation_threshold_m_s
+    assert shaky.stability < 0.2
+    wc = 2 * np.pi * 0.25
+
+    def circle(t):  # the operator's circle: the angular speed ramps up over the first second
+        phi = 0.5 * wc * t * t if t < 1.0 else wc * (t - 0.5)
+        return [0.04 * np.cos(phi), 0.04 * np.sin(phi), 0.3]
+
+    calm = _watch_run(circle)
+    assert calm.stability == 1.0
+    assert calm.oscillation_m_s < 0.5 * calm.params.oscillation_threshold_m_s

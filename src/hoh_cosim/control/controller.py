@@ -233,7 +233,9 @@ class HandGuidingController:
             v, w = twist_law[:3], twist_law[3:]
         else:
             if p.translation.law == "variable":
-                v = self._variable.step(t, F, p.translation.slope, p.translation.deadband)
+                v = self._variable.step(
+                    t, F, p.translation.slope, p.translation.deadband, inputs["p_BT_B"]
+                )
             else:
                 v = apply_law(F, p.translation)
             w = apply_law(inputs["tau_hand_B"], p.rotation)

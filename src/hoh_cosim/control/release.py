@@ -10,8 +10,10 @@ newest unfiltered packet (compensated the same way), η the deadband of eq. 10 a
 (axes with η = 0 left out):
 
     trend       n = ‖F̂‖_η ,   ṅ = (n - n_prev) / Δt
-    release     guiding  and  ‖F_raw‖_η <= 1  and  n + h ṅ <= 1  and  ṅ <= -ṅ_min
-                (the newest packet is already back inside the deadband, the estimate is falling
+    release     guiding  and  ‖F_raw‖_b <= 1  and  n + h ṅ <= 1  and  ṅ <= -ṅ_min
+                with b = max(η, raw_band_N) per axis: the raw packet's own noise band, so that a
+                narrow deadband does not wait for a quiet packet
+                (the newest packet is already back inside that band, the estimate is falling
                 fast and will be inside within the horizon h: the hand has let go; a light push
                 whose raw packet dips into the deadband by noise is not falling fast)
     hold        released: the command is rest until a push that grows (ṅ > 0) and that the raw
@@ -35,10 +37,12 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from hoh_cosim.control.vectors import Vec3, as_scalar
+import numpy as np
+
+from hoh_cosim.control.vectors import Vec3, as_nonnegative_vector, as_scalar, frozen
 
 __all__ = ["ReleaseDetector", "ReleaseParams", "ReleasePhase", "scaled_norm"]
 
@@ -68,6 +72,8 @@ class ReleaseParams:
     hold_s: how long the brake holds unless a firm push (‖F̂‖_η > reengage_factor) comes.
     reengage_factor: k_re, a push this many deadbands strong ends the hold at once.
     contact_threshold_N: probe contact force above which a release is RELEASED_CONTACT.
+    raw_band_N: [N] per base axis, the raw packet's noise band (the FT-150's max |noise|, about
+        1.15, 1.06, 0.31 N, seed 4.C): inside max(η, this) a packet counts as "no push".
     """
 
     UNITS: ClassVar[dict[str, Any]] = {
@@ -76,6 +82,7 @@ class ReleaseParams:
         "hold_s": "s",
         "reengage_factor": "1",
         "contact_threshold_N": "N",
+        "raw_band_N": "N",
     }
 
     enabled: bool = False
@@ -84,8 +91,12 @@ class ReleaseParams:
     hold_s: float = 0.15
     reengage_factor: float = 2.0
     contact_threshold_N: float = 1.0
+    raw_band_N: Vec3 = field(default_factory=lambda: frozen([1.15, 1.15, 0.31]))
 
     def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "raw_band_N", as_nonnegative_vector(self.raw_band_N, 3, "raw_band_N")
+        )
         for name in ("horizon_s", "hold_s", "contact_threshold_N"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         object.__setattr__(
@@ -145,6 +156,8 @@ class ReleaseDetector:
         # axis's noise extrapolated over the horizon would look like a push)
         n_dot = (n - self._n_prev) / dt if dt is not None and dt > 0.0 else 0.0
         n_raw = None if F_raw is None else scaled_norm(F_raw, deadband)
+        band = np.maximum(deadband, p.raw_band_N)
+        b_raw = None if F_raw is None else scaled_norm(F_raw, band)
         self._t_prev, self._n_prev = t, n
 
         if self.phase.released:
@@ -158,7 +171,7 @@ class ReleaseDetector:
             return False
 
         if p.enabled and self.phase == ReleasePhase.GUIDING:
-            raw_inside = n_raw is None or n_raw <= 1.0
+            raw_inside = b_raw is None or b_raw <= 1.0
             # n + h ṅ <= 1: inside the deadband within the horizon
             if raw_inside and n + p.horizon_s * n_dot <= 1.0 and n_dot <= -p.min_fall_per_s:
                 contact = (

@@ -16,6 +16,25 @@ accelerates the probe and falls while it brakes.
 k = 0 (or g_min = g_max = 1) is eq. 10 exactly: the seed's law is the special case. g changes the
 slope only: the law stays odd, zero inside the deadband and passive (F · ẋ >= 0 for g > 0), and
 g <= g_max bounds the loop gain the linear analysis must cover (`hoh_cosim.study.linear`).
+
+Stability against a stiff hand. A hand that grips hard and reacts late (a delayed stiffness of
+1000 N/m or more) makes the hand-robot loop oscillate at 1-3 Hz at the seed's slope, and no
+passivity controller on the robot sees it: the robot only yields to the hand, the hand's own delay
+drives the oscillation (`docs/decisions.md`). Dimeas and Aspragathos (IEEE Trans. Haptics 9(2),
+2016, "Online stability in human-robot cooperation with admittance control") detect the onset from
+the interaction's high-frequency content and raise the damping until it dies. Ours watches the
+tip's measured velocity (the controller has the TCP's positions):
+
+    u      = highpass_fo(highpass_fo(v))                    (second order, f_o = 1 Hz: the
+                                                              circles' 0.25 Hz pass at 6 %)
+    σ²    ← σ² + (Δt / T_w) (‖u‖² - σ²)                     (its mean power over T_w = 0.5 s)
+    h     ← max(h_min, h e^(-λ Δt))   while σ > σ_o          (the slope falls fast)
+    h     ← min(1, h + ρ Δt)          otherwise              (and comes back slowly)
+    ẋ      = h · g · α (|F| - η) sgn F
+
+σ_o = 12 mm/s sits above what a relaxed hand's circles show (about 4 mm/s: the circle's 63 mm/s
+through the high-pass, and jitter) and below an oscillation (30-60 mm/s at 1-3 Hz). h = 1 whenever the loop is quiet, so it changes nothing for the default
+operator; with `oscillation_decay_per_s` = 0 it is off.
 """
 
 from __future__ import annotations
@@ -23,6 +42,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
+
+import numpy as np
 
 from hoh_cosim.control.admittance import deadband_linear
 from hoh_cosim.control.release import scaled_norm
@@ -41,12 +62,24 @@ class VariableAdmittanceParams:
         "intent_rate_per_s": "1/s",
         "slope_min": "1",
         "slope_max": "1",
+        "oscillation_cutoff_hz": "Hz",
+        "oscillation_window_s": "s",
+        "oscillation_threshold_m_s": "m/s",
+        "oscillation_decay_per_s": "1/s",
+        "oscillation_recover_per_s": "1/s",
+        "oscillation_min": "1",
     }
 
-    intent_gain: float = 0.3
-    intent_rate_per_s: float = 10.0
+    intent_gain: float = 0.2
+    intent_rate_per_s: float = 20.0
     slope_min: float = 0.7
     slope_max: float = 1.3
+    oscillation_cutoff_hz: float = 1.0  # f_o
+    oscillation_window_s: float = 0.5  # T_w
+    oscillation_threshold_m_s: float = 0.012  # σ_o
+    oscillation_decay_per_s: float = 4.0  # λ (0: no oscillation watch)
+    oscillation_recover_per_s: float = 0.05  # ρ
+    oscillation_min: float = 0.05  # h_min
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "intent_gain", as_scalar(self.intent_gain, "intent_gain", low=0.0))
@@ -59,6 +92,21 @@ class VariableAdmittanceParams:
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
+        for name in (
+            "oscillation_cutoff_hz",
+            "oscillation_window_s",
+            "oscillation_threshold_m_s",
+        ):
+            object.__setattr__(
+                self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
+            )
+        for name in ("oscillation_decay_per_s", "oscillation_recover_per_s"):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
+        object.__setattr__(
+            self,
+            "oscillation_min",
+            as_scalar(self.oscillation_min, "oscillation_min", low=0.0, low_open=True, high=1.0),
+        )
         if not self.slope_min <= 1.0 <= self.slope_max:
             raise ConfigError(
                 f"slope_min <= 1 <= slope_max expected, got {self.slope_min} and {self.slope_max}"
@@ -76,14 +124,47 @@ class VariableAdmittance:
         self._t_prev: float | None = None
         self._e_prev = 0.0
         self.factor = 1.0  # g of the last step
+        self.stability = 1.0  # h: the oscillation watch's factor
+        self._p_prev: Vec3 | None = None
+        self._v_prev = np.zeros(3)
+        self._u1 = np.zeros(3)
+        self._u = np.zeros(3)
+        self.oscillation_m_s = 0.0  # σ
 
-    def step(self, t: float, F: Vec3, slope: Vec3, deadband: Vec3) -> Vec3:
+    def _watch(self, dt: float, p_B: Vec3) -> None:
+        """The oscillation watch of the module docstring, one controller period dt."""
+        p = self.params
+        if self._p_prev is not None:
+            v = (p_B - self._p_prev) / dt
+            # first-order high-pass twice: u ← a (u + x - x_prev), a = τ/(τ + Δt), τ = 1/(2π f_o)
+            tau = 1.0 / (2.0 * math.pi * p.oscillation_cutoff_hz)
+            a = tau / (tau + dt)
+            u1 = a * (self._u1 + v - self._v_prev)
+            self._u = a * (self._u + u1 - self._u1)
+            self._v_prev, self._u1 = v, u1
+            power = float(self._u.dot(self._u))
+            ms = self.oscillation_m_s**2
+            ms += min(1.0, dt / p.oscillation_window_s) * (power - ms)
+            self.oscillation_m_s = math.sqrt(ms)
+            if self.oscillation_m_s > p.oscillation_threshold_m_s:
+                self.stability = max(
+                    p.oscillation_min, self.stability * math.exp(-p.oscillation_decay_per_s * dt)
+                )
+            else:
+                self.stability = min(1.0, self.stability + p.oscillation_recover_per_s * dt)
+        self._p_prev = p_B.copy()
+
+    def step(self, t: float, F: Vec3, slope: Vec3, deadband: Vec3, p_B: Vec3 | None = None) -> Vec3:
+        """The law's velocity for the force F; `p_B` the tip's measured position (None: no
+        oscillation watch)."""
         p = self.params
         e = max(0.0, scaled_norm(F, deadband) - 1.0)
         dt = None if self._t_prev is None else t - self._t_prev
         e_dot = (e - self._e_prev) / dt if dt is not None and dt > 0.0 else 0.0
         self._t_prev, self._e_prev = t, e
+        if p_B is not None and dt is not None and dt > 0.0 and p.oscillation_decay_per_s > 0.0:
+            self._watch(dt, p_B)
         # g = clip(1 + k tanh(ė/ė_ref), g_min, g_max)
         g = 1.0 + p.intent_gain * math.tanh(e_dot / p.intent_rate_per_s)
         self.factor = g = min(max(g, p.slope_min), p.slope_max)
-        return deadband_linear(F, g * slope, deadband)
+        return deadband_linear(F, (self.stability * g) * slope, deadband)
