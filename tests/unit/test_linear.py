@@ -101,6 +101,23 @@ def test_the_lead_lowpass_has_no_peak_and_little_lag_at_the_circles() -> None:
     assert lead.phase_margin_deg >= 45.0
 
 
+def test_the_variable_laws_light_schedule_adds_margin_and_a_heavy_one_takes_it() -> None:
+    """Linearised about the tuned circles' push (about 10 deadbands), the default k = 0.05 is a
+    lead that raises the gain margin over eq. 10's; k = 0.2 lowers it."""
+    from hoh_cosim.control.variable_admittance import VariableAdmittanceParams
+    from hoh_cosim.study.linear import variable_law_lead
+
+    model = LoopModel(0.0145, 300.0, 20.0, 0.15, 0.004, 0.016)
+    g = filter_response(EstimatorParams(filter="lead_lowpass"), OMEGA)
+    excess = 4.8 / 0.45 - 1.0
+
+    def gm(k: float) -> float:
+        lead = variable_law_lead(VariableAdmittanceParams(intent_gain=k), excess, OMEGA)
+        return loop_margins(model, g * lead, OMEGA).gain_margin
+
+    assert gm(0.05) > 2.0 > gm(0.0) > gm(0.2)
+
+
 def test_margins_of_an_integrator_with_delay() -> None:
     """L = α K e^{-sT} / s: the phase reaches -180° at ω = π / (2T), where |L| = α K / ω, so the
     loop loses stability at α = π / (2 T K); the phase margin is 90° - ω_c T · 180/π at ω_c = α K."""

@@ -173,6 +173,7 @@ class _World:
         self.operator = Operator(OperatorParams(task=setup.task, start_s=start))
         self.task_held = setup.task_start_s is None
         self.go = False
+        self._acceleration = np.zeros(1)  # speedL's a of the last command
         rng = np.random.default_rng(setup.seed)
         self.ft = FT150Sensor(FT150Params(rate_hz=setup.ft_rate_hz), rng=rng)
         self.probe = FSE103Sensor(FSE103Params(), rng=rng)
@@ -306,6 +307,7 @@ class _World:
     def _command(self, now: float) -> Vec:
         c = self.command.read()
         twist, kick, stop = c[:6], c[7], c[8]
+        self._acceleration = c[6:7]
         self.go = c[10] > 0.5
         if stop > 0.5:
             self.program_stopped = True
@@ -380,6 +382,9 @@ class _World:
             WORLD_DT,
             {
                 "twist_cmd_B": twist,
+                # speedL's a as sent: the arm takes it for a command to rest when it brakes
+                # harder than the arm's own acceleration (a release), never otherwise
+                "brake_accel": self._acceleration,
                 "F_hand_B": hand["F_hand_B"],
                 "tau_hand_B": hand["tau_hand_B"],
                 "F_tip_B": hand["F_tip_B"],

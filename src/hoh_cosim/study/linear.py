@@ -62,6 +62,7 @@ __all__ = [
     "loop_margins",
     "loop_model",
     "open_loop",
+    "variable_law_lead",
 ]
 
 OMEGA = np.logspace(-2, math.log10(0.98 * math.pi / 0.005), 3000)
@@ -175,6 +176,13 @@ def filter_response(
         )
     response = control.frequency_response(system, omega)
     return np.asarray(response.complex).reshape(-1)
+
+
+def variable_law_lead(params, excess: float, omega: np.ndarray) -> np.ndarray:
+    """The variable law's schedule (`hoh_cosim.control.variable_admittance`) linearised about a
+    steady push of `excess` deadbands beyond the deadband: 1 + (k e₀ / ė_ref) iω, a factor of the
+    loop L(iω) (the slope's own g is 1 in a steady push)."""
+    return 1.0 + (params.intent_gain * excess / params.intent_rate_per_s) * 1j * omega
 
 
 def lag_ms(response: complex, omega: float) -> float:
