@@ -65,19 +65,23 @@ class PassivityController:
     def reset(self) -> None:
         self.energy_J = self.params.tank_max_J  # the tank starts full
         self._t_prev: float | None = None
-        self._p_prev: Vec3 | None = None
+        self._p_prev: list[float] | None = None
         self.dissipated_J = 0.0  # energy the PC has dissipated since the reset
 
     def observe(self, t: float, F: Vec3, p_B: Vec3) -> float:
         """The PO: the tip's velocity since the last tick from its positions, the energy that
         flowed in with the force `F`; returns Δt (0 on the first tick)."""
         dt = 0.0
+        pos = p_B.tolist()
         if self._t_prev is not None and self._p_prev is not None and t > self._t_prev:
             dt = t - self._t_prev
-            v = (p_B - self._p_prev) / dt
+            # F̂ · v Δt = F̂ · (p - p_prev), v the mean velocity over Δt
+            f0, f1, f2 = F.tolist()
+            q0, q1, q2 = self._p_prev
+            work = f0 * (pos[0] - q0) + f1 * (pos[1] - q1) + f2 * (pos[2] - q2)
             # E(n) = min(E_max, E(n-1) + F̂ · v Δt)
-            self.energy_J = min(self.params.tank_max_J, self.energy_J + float(F.dot(v)) * dt)
-        self._t_prev, self._p_prev = t, p_B.copy()
+            self.energy_J = min(self.params.tank_max_J, self.energy_J + work)
+        self._t_prev, self._p_prev = t, pos
         return dt
 
     def control(self, v_c: Vec3, F: Vec3, dt: float) -> tuple[Vec3, bool]:

@@ -49,8 +49,6 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-import numpy as np
-
 from hoh_cosim.control.admittance import deadband_linear
 from hoh_cosim.control.release import scaled_norm
 from hoh_cosim.control.vectors import Vec3, as_scalar
@@ -131,24 +129,26 @@ class VariableAdmittance:
         self._e_prev = 0.0
         self.factor = 1.0  # g of the last step
         self.stability = 1.0  # h: the oscillation watch's factor
-        self._p_prev: Vec3 | None = None
-        self._v_prev = np.zeros(3)
-        self._u1 = np.zeros(3)
-        self._u = np.zeros(3)
+        # the watch's state as Python floats (3-vectors: cheaper than numpy's small arrays)
+        self._p_prev: list[float] | None = None
+        self._v_prev = [0.0, 0.0, 0.0]
+        self._u1 = [0.0, 0.0, 0.0]
+        self._u = [0.0, 0.0, 0.0]
         self.oscillation_m_s = 0.0  # σ
 
     def _watch(self, dt: float, p_B: Vec3) -> None:
         """The oscillation watch of the module docstring, one controller period dt."""
         p = self.params
+        pos = p_B.tolist()
         if self._p_prev is not None:
-            v = (p_B - self._p_prev) / dt
+            v = [(a - b) / dt for a, b in zip(pos, self._p_prev, strict=True)]
             # first-order high-pass twice: u ← a (u + x - x_prev), a = τ/(τ + Δt), τ = 1/(2π f_o)
             tau = 1.0 / (2.0 * math.pi * p.oscillation_cutoff_hz)
             a = tau / (tau + dt)
-            u1 = a * (self._u1 + v - self._v_prev)
-            self._u = a * (self._u + u1 - self._u1)
-            self._v_prev, self._u1 = v, u1
-            power = float(self._u.dot(self._u))
+            u1 = [a * (u + x - x0) for u, x, x0 in zip(self._u1, v, self._v_prev, strict=True)]
+            u = [a * (w + x - x0) for w, x, x0 in zip(self._u, u1, self._u1, strict=True)]
+            self._v_prev, self._u1, self._u = v, u1, u
+            power = u[0] * u[0] + u[1] * u[1] + u[2] * u[2]
             ms = self.oscillation_m_s**2
             ms += min(1.0, dt / p.oscillation_window_s) * (power - ms)
             self.oscillation_m_s = math.sqrt(ms)
@@ -158,7 +158,7 @@ class VariableAdmittance:
                 )
             else:
                 self.stability = min(1.0, self.stability + p.oscillation_recover_per_s * dt)
-        self._p_prev = p_B.copy()
+        self._p_prev = pos
 
     def step(self, t: float, F: Vec3, slope: Vec3, deadband: Vec3, p_B: Vec3 | None = None) -> Vec3:
         """The law's velocity for the force F; `p_B` the tip's measured position (None: no
