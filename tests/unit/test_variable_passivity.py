@@ -123,3 +123,20 @@ def test_an_oscillation_lowers_the_slope_and_a_circle_does_not():
     calm = _watch_run(circle)
     assert calm.stability == 1.0
     assert calm.oscillation_m_s < 0.5 * calm.params.oscillation_threshold_m_s
+
+
+def test_the_start_of_a_firm_push_is_not_an_oscillation():
+    """A step of the tip's speed to 66 mm/s (a 5 N push, ramped at 1 m/s²) swings the
+    high-passed velocity once: large, but no oscillation; the slope stays."""
+
+    def push(t):
+        if t < 1.0:
+            return [0.0, 0.0, 0.3]
+        ramp = 0.066  # [s] to reach 66 mm/s at 1 m/s²
+        s = t - 1.0
+        x = 0.5 * s * s if s < ramp else 0.5 * ramp * ramp + ramp * (s - ramp)
+        return [x, 0.0, 0.3]
+
+    run = _watch_run(push)
+    assert run.stability == 1.0
+    assert run.swings < run.params.oscillation_swings

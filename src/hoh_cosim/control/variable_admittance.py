@@ -34,9 +34,14 @@ tip's measured velocity (the controller has the TCP's positions):
     u      = highpass_fo(highpass_fo(v))                    (second order, f_o = 1 Hz: the
                                                               circles' 0.25 Hz pass at 6 %)
     σ²    ← σ² + (Δt / T_w) (‖u‖² - σ²)                     (its mean power over T_w = 0.5 s)
-    h     ← max(h_min, h e^(-λ Δt))   while σ > σ_o          (the slope falls fast)
+    c     ← c e^(-Δt / T_r) + [u · u_big < 0]               (swings: u, when ‖u‖ > σ_o, points
+                                                              against the last such u_big; T_r = 2 s)
+    h     ← max(h_min, h e^(-λ Δt))   while σ > σ_o and c >= c_o   (the slope falls fast)
     h     ← min(1, h + ρ Δt)          otherwise              (and comes back slowly)
     ẋ      = h · g · α (|F| - η) sgn F
+
+The swings tell an oscillation (two large reversals a second at 1 Hz, so c settles near 4) from the
+start of a firm push, whose high-passed velocity swings once (c <= 1) however large it is; c_o = 2.5.
 
 σ_o = 12 mm/s sits above what a relaxed hand's circles show (about 4 mm/s: the circle's 63 mm/s
 through the high-pass, and jitter) and below an oscillation (30-60 mm/s at 1-3 Hz). h = 1 whenever the loop is quiet, so it changes nothing for the default
@@ -56,6 +61,8 @@ from hoh_cosim.errors import ConfigError
 
 __all__ = ["VariableAdmittance", "VariableAdmittanceParams"]
 
+_SWING_WINDOW_S = 2.0  # T_r
+
 
 @dataclass(frozen=True)
 class VariableAdmittanceParams:
@@ -72,6 +79,7 @@ class VariableAdmittanceParams:
         "oscillation_decay_per_s": "1/s",
         "oscillation_recover_per_s": "1/s",
         "oscillation_min": "1",
+        "oscillation_swings": "1",
     }
 
     intent_gain: float = 0.05
@@ -84,6 +92,7 @@ class VariableAdmittanceParams:
     oscillation_decay_per_s: float = 4.0  # λ (0: no oscillation watch)
     oscillation_recover_per_s: float = 0.05  # ρ
     oscillation_min: float = 0.05  # h_min
+    oscillation_swings: float = 2.5  # c_o
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "intent_gain", as_scalar(self.intent_gain, "intent_gain", low=0.0))
@@ -104,7 +113,7 @@ class VariableAdmittanceParams:
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
-        for name in ("oscillation_decay_per_s", "oscillation_recover_per_s"):
+        for name in ("oscillation_decay_per_s", "oscillation_recover_per_s", "oscillation_swings"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         object.__setattr__(
             self,
@@ -134,6 +143,8 @@ class VariableAdmittance:
         self._v_prev = [0.0, 0.0, 0.0]
         self._u1 = [0.0, 0.0, 0.0]
         self._u = [0.0, 0.0, 0.0]
+        self._u_big: list[float] | None = None
+        self.swings = 0.0  # c
         self.oscillation_m_s = 0.0  # σ
 
     def _watch(self, dt: float, p_B: Vec3) -> None:
@@ -152,7 +163,16 @@ class VariableAdmittance:
             ms = self.oscillation_m_s**2
             ms += min(1.0, dt / p.oscillation_window_s) * (power - ms)
             self.oscillation_m_s = math.sqrt(ms)
-            if self.oscillation_m_s > p.oscillation_threshold_m_s:
+            self.swings *= math.exp(-dt / _SWING_WINDOW_S)
+            if power > p.oscillation_threshold_m_s**2:
+                big = self._u_big
+                if big is not None and u[0] * big[0] + u[1] * big[1] + u[2] * big[2] < 0.0:
+                    self.swings += 1.0
+                self._u_big = u
+            if (
+                self.oscillation_m_s > p.oscillation_threshold_m_s
+                and self.swings >= p.oscillation_swings
+            ):
                 self.stability = max(
                     p.oscillation_min, self.stability * math.exp(-p.oscillation_decay_per_s * dt)
                 )
