@@ -17,7 +17,8 @@ newest unfiltered packet (compensated the same way), η the deadband of eq. 10 a
                 fast and will be inside within the horizon h: the hand has let go; a light push
                 whose raw packet dips into the deadband by noise is not falling fast)
     hold        released: the command is rest until a push that grows (ṅ > 0) and that the raw
-                packet confirms (‖F_raw‖_η > 1) is either firm, n > k_re (re-engage at once), or
+                packet confirms above its noise band (‖F_raw‖_b > 1) is either firm, n > k_re
+                (re-engage at once), or
                 outside the deadband, n > 1, after hold_s: neither the estimate still falling
                 after the release nor the filter's undershoot, which falls back towards zero,
                 moves the robot again
@@ -155,14 +156,13 @@ class ReleaseDetector:
         # ṅ = (‖F̂‖_η - ‖F̂_prev‖_η)/Δt: the trend of the force's size, not of each axis (an
         # axis's noise extrapolated over the horizon would look like a push)
         n_dot = (n - self._n_prev) / dt if dt is not None and dt > 0.0 else 0.0
-        n_raw = None if F_raw is None else scaled_norm(F_raw, deadband)
         band = np.maximum(deadband, p.raw_band_N)
         b_raw = None if F_raw is None else scaled_norm(F_raw, band)
         self._t_prev, self._n_prev = t, n
 
         if self.phase.released:
             assert self.t_release is not None
-            growing = n_dot > 0.0 and (n_raw is None or n_raw > 1.0)
+            growing = n_dot > 0.0 and (b_raw is None or b_raw > 1.0)
             held = t - self.t_release >= p.hold_s - 1e-9
             if not (growing and (n > p.reengage_factor or (held and n > 1.0))):
                 return True
