@@ -34,18 +34,27 @@ tip's measured velocity (the controller has the TCP's positions):
     u      = highpass_fo(highpass_fo(v))                    (second order, f_o = 1 Hz: the
                                                               circles' 0.25 Hz pass at 6 %)
     σ²    ← σ² + (Δt / T_w) (‖u‖² - σ²)                     (its mean power over T_w = 0.5 s)
-    c     ← c e^(-Δt / T_r) + [u · u_big < 0]               (swings: u, when ‖u‖ > σ_o, points
-                                                              against the last such u_big; T_r = 2 s)
-    h     ← max(h_min, h e^(-λ Δt))   while σ > σ_o and c >= c_o   (the slope falls fast)
-    h     ← min(1, h + ρ Δt)          otherwise              (and comes back slowly)
+    c     ← c e^(-Δt / T_r) + Σᵢ [sgn uᵢ ≠ sᵢ]              (swings: an axis of u beyond ±σ_o
+                                                              with the other sign than the last
+                                                              time it was, sᵢ; T_r = 2 s)
+    oscillating  ⇔  σ > σ_o  and  c >= c_o
+    on it:       h ← h/2, c ← 0                             (halve the slope, count afresh)
+    quiet for T_q after the last halving:  h ← h/2 once     (the loop was still oscillating at
+                                                              2h and is quiet at h: the critical
+                                                              slope lies between, so h/2 keeps a
+                                                              gain margin of at least 2)
+    h     ← min(1, h e^(ρ Δt))                              (and comes back slowly, ρ = 0.01/s:
+                                                              doubling in 70 s)
     ẋ      = h · g · α (|F| - η) sgn F
 
-The swings tell an oscillation (two large reversals a second at 1 Hz, so c settles near 4) from the
-start of a firm push, whose high-passed velocity swings once (c <= 1) however large it is; c_o = 2.5.
-
-σ_o = 12 mm/s sits above what a relaxed hand's circles show (about 4 mm/s: the circle's 63 mm/s
-through the high-pass, and jitter) and below an oscillation (30-60 mm/s at 1-3 Hz). h = 1 whenever the loop is quiet, so it changes nothing for the default
-operator; with `oscillation_decay_per_s` = 0 it is off.
+The swings tell an oscillation (two large reversals a second per axis at 1 Hz, so c settles near 4
+or above) from the start of a firm push, whose high-passed velocity swings once (c <= 1) however
+large it is; c_o = 2.5. Per axis, so that an oscillation around a circle, whose high-passed velocity
+turns rather than passes through zero, counts too. σ_o = 12 mm/s sits above what a relaxed hand's
+circles show (about 4 mm/s: the circle's 63 mm/s through the high-pass, and jitter) and below an
+oscillation (30-60 mm/s). h = 1 while the loop is quiet, so it changes nothing for a relaxed
+operator; `oscillation_watch` False switches it off. A hand that stays stiff meets the slope
+coming back after a minute or two and is halved again.
 """
 
 from __future__ import annotations
@@ -76,7 +85,7 @@ class VariableAdmittanceParams:
         "oscillation_cutoff_hz": "Hz",
         "oscillation_window_s": "s",
         "oscillation_threshold_m_s": "m/s",
-        "oscillation_decay_per_s": "1/s",
+        "oscillation_quiet_s": "s",
         "oscillation_recover_per_s": "1/s",
         "oscillation_min": "1",
         "oscillation_swings": "1",
@@ -89,8 +98,9 @@ class VariableAdmittanceParams:
     oscillation_cutoff_hz: float = 1.0  # f_o
     oscillation_window_s: float = 0.5  # T_w
     oscillation_threshold_m_s: float = 0.012  # σ_o
-    oscillation_decay_per_s: float = 4.0  # λ (0: no oscillation watch)
-    oscillation_recover_per_s: float = 0.05  # ρ
+    oscillation_watch: bool = True
+    oscillation_quiet_s: float = 2.0  # T_q
+    oscillation_recover_per_s: float = 0.01  # ρ
     oscillation_min: float = 0.05  # h_min
     oscillation_swings: float = 2.5  # c_o
 
@@ -113,7 +123,7 @@ class VariableAdmittanceParams:
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
-        for name in ("oscillation_decay_per_s", "oscillation_recover_per_s", "oscillation_swings"):
+        for name in ("oscillation_quiet_s", "oscillation_recover_per_s", "oscillation_swings"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         object.__setattr__(
             self,
@@ -143,8 +153,11 @@ class VariableAdmittance:
         self._v_prev = [0.0, 0.0, 0.0]
         self._u1 = [0.0, 0.0, 0.0]
         self._u = [0.0, 0.0, 0.0]
-        self._u_big: list[float] | None = None
+        self._signs = [0.0, 0.0, 0.0]  # sᵢ
         self.swings = 0.0  # c
+        self._t = 0.0  # the watch's own clock [s]
+        self._halved_at: float | None = None  # when h was last halved on an oscillation
+        self._margined = True  # the margin halving after the last oscillation is done
         self.oscillation_m_s = 0.0  # σ
 
     def _watch(self, dt: float, p_B: Vec3) -> None:
@@ -164,20 +177,32 @@ class VariableAdmittance:
             ms += min(1.0, dt / p.oscillation_window_s) * (power - ms)
             self.oscillation_m_s = math.sqrt(ms)
             self.swings *= math.exp(-dt / _SWING_WINDOW_S)
-            if power > p.oscillation_threshold_m_s**2:
-                big = self._u_big
-                if big is not None and u[0] * big[0] + u[1] * big[1] + u[2] * big[2] < 0.0:
-                    self.swings += 1.0
-                self._u_big = u
+            big = p.oscillation_threshold_m_s
+            for i, ui in enumerate(u):
+                if abs(ui) > big:
+                    sign = math.copysign(1.0, ui)
+                    if self._signs[i] == -sign:
+                        self.swings += 1.0
+                    self._signs[i] = sign
+            self._t += dt
             if (
                 self.oscillation_m_s > p.oscillation_threshold_m_s
                 and self.swings >= p.oscillation_swings
-            ):
-                self.stability = max(
-                    p.oscillation_min, self.stability * math.exp(-p.oscillation_decay_per_s * dt)
+            ):  # oscillating: halve the slope, count afresh
+                self.stability = max(p.oscillation_min, 0.5 * self.stability)
+                self.swings = 0.0
+                self._halved_at, self._margined = self._t, False
+            elif (
+                not self._margined
+                and self._halved_at is not None
+                and self._t - self._halved_at >= p.oscillation_quiet_s
+            ):  # quiet at h after oscillating at 2h: h/2 for a gain margin of 2
+                self.stability = max(p.oscillation_min, 0.5 * self.stability)
+                self._margined = True
+            elif self._margined:
+                self.stability = min(
+                    1.0, self.stability * math.exp(p.oscillation_recover_per_s * dt)
                 )
-            else:
-                self.stability = min(1.0, self.stability + p.oscillation_recover_per_s * dt)
         self._p_prev = pos
 
     def step(self, t: float, F: Vec3, slope: Vec3, deadband: Vec3, p_B: Vec3 | None = None) -> Vec3:
@@ -188,7 +213,7 @@ class VariableAdmittance:
         dt = None if self._t_prev is None else t - self._t_prev
         e_dot = (e - self._e_prev) / dt if dt is not None and dt > 0.0 else 0.0
         self._t_prev, self._e_prev = t, e
-        if p_B is not None and dt is not None and dt > 0.0 and p.oscillation_decay_per_s > 0.0:
+        if p_B is not None and dt is not None and dt > 0.0 and p.oscillation_watch:
             self._watch(dt, p_B)
         # g = clip(1 + k tanh(ė/ė_ref), g_min, g_max)
         g = 1.0 + p.intent_gain * math.tanh(e_dot / p.intent_rate_per_s)
