@@ -64,6 +64,7 @@ METRICS = {
         "filter_lag_ms": float,
         "estimate_rms_error_N": float,
         "velocity_hf_rms_m_s": float,
+        "velocity_hf_late_rms_m_s": float,
     },
     "static_noise": {
         "noise_max_abs_raw_N": list,

@@ -115,9 +115,10 @@ def test_the_laws_side_by_side(report: Path) -> None:
             assert rows[f"{law}|{what}"]["status"] == "ok", (law, what)
     settle = float(rows[f"{seed}|release.yaml"]["release_settle_s"])
     assert float(rows[f"{new}|release.yaml"]["release_settle_s"]) < 0.5 * settle
-    shaky = float(rows[f"{seed}|population|3000|0.25"]["velocity_hf_rms_m_s"])
-    calm = float(rows[f"{new}|population|3000|0.25"]["velocity_hf_rms_m_s"])
-    assert shaky > 0.02 > 0.012 > calm
+    # over the last circle: a sustained oscillation (tens of mm/s) against one stopped
+    shaky = float(rows[f"{seed}|population|3000|0.25"]["velocity_hf_late_rms_m_s"])
+    calm = float(rows[f"{new}|population|3000|0.25"]["velocity_hf_late_rms_m_s"])
+    assert shaky > 0.02 > 0.005 > calm
 
 
 def test_contact_compensation_and_the_housing(report: Path) -> None:
