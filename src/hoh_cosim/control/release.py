@@ -132,10 +132,20 @@ class ReleaseDetector:
         self._t_prev: float | None = None
         self._n_prev = 0.0
         self.releases = 0  # how many times the hand let go since the reset
+        self._band_key: tuple[int, int] | None = None
+        self._band_value = np.zeros(3)
 
     @property
     def released(self) -> bool:
         return self.phase.released
+
+    def _band(self, deadband: Vec3) -> Vec3:
+        """b = max(η, raw_band_N), kept while η and the parameters stay the same objects."""
+        key = (id(deadband), id(self.params))
+        if self._band_key != key:
+            self._band_key, self._band_value = key, np.maximum(deadband, self.params.raw_band_N)
+            self._band_of = (deadband, self.params)  # keeps the ids valid
+        return self._band_value
 
     def step(
         self,
@@ -156,8 +166,7 @@ class ReleaseDetector:
         # ṅ = (‖F̂‖_η - ‖F̂_prev‖_η)/Δt: the trend of the force's size, not of each axis (an
         # axis's noise extrapolated over the horizon would look like a push)
         n_dot = (n - self._n_prev) / dt if dt is not None and dt > 0.0 else 0.0
-        band = np.maximum(deadband, p.raw_band_N)
-        b_raw = None if F_raw is None else scaled_norm(F_raw, band)
+        b_raw = None if F_raw is None else scaled_norm(F_raw, self._band(deadband))
         self._t_prev, self._n_prev = t, n
 
         if self.phase.released:
