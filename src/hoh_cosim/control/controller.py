@@ -7,11 +7,11 @@ Per tick:
                                                                   → any of these: zero twist, stop flag
     law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on); v = law(F̃) (eq. 10 or
                an alternative: `variable` adapts eq. 10's slope to the hand's intent), ω = law(τ_hand)
-    passivity  the passivity observer and controller with its energy tank
-               (`hoh_cosim.control.passivity`, if on): the command yields to the hand when the
-               robot has given back more energy than it took
     release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at
                `max_brake_accel`, until the hand pushes again
+    passivity  the passivity observer and controller with its energy tank
+               (`hoh_cosim.control.passivity`, if on; not while braking): the command yields to
+               the hand when the robot has given back more energy than it took
     fixture    while |F_probe| > threshold no upward motion (3.F.3, if on)
     limits     the supervisor's `limit_command`: speed clamp · acceleration clamp (the braking
                deceleration towards rest after a release) · probe-force soft cap · workspace box
