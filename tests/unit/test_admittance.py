@@ -188,4 +188,4 @@ def test_gains_reject_bad_values(kwargs, message):
 
 
 def test_every_law_is_listed():
-    assert set(LAWS) == {"deadband_linear", "isotropic", "sigmoid"}
+    assert set(LAWS) == {"deadband_linear", "isotropic", "sigmoid", "variable"}
