@@ -62,6 +62,7 @@ WORLD_DT = 1e-3
 # p, R, twist, [mode, safety, protective, emergency, program, time], q, qd, the TCP's wrench,
 # the orientation as a rotation vector (as RTDE gives it; computed here, not in the runner's loop)
 _STATE = 3 + 9 + 6 + 6 + 6 + 6 + 6 + 3
+_NO_ACCELERATION = np.zeros(1)
 _COMMAND = 6 + 4 + 1  # twist, [acceleration, kick time, stop, sequence], the task's go
 TASK_LEAD_S = 0.5
 """[s] With no `task_start_s`, the hand takes the handle this long after `start_task()`."""
@@ -314,6 +315,7 @@ class _World:
         if kick > 0.0 and now - kick > 1.0 / self.setup.watchdog_hz:
             self.program_stopped = True  # the watchdog: the program on the robot halts
         if self.program_stopped or self.protective:
+            self._acceleration = _NO_ACCELERATION  # the stop as before: the arm's own ramp
             return np.zeros(6)
         return twist
 
