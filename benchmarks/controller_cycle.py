@@ -1,11 +1,15 @@
 """Cost of one control cycle: Estimator.step + HandGuidingController.step.
 
-    python benchmarks/controller_cycle.py [--cycles N] [--packet-every K]
+    python benchmarks/controller_cycle.py [--cycles N] [--packet-every K] [--new-laws]
 
 100 000 cycles at a 1 kHz tick with all three filters running and a packet from both sensors every 5
 ticks (the worst case: on those ticks all three Kalman filters correct). The operator pushes in a slow
 circle so the law, the clamps and the filters all do real work. Prints p50, p99, p99.9 and the max in
 microseconds, then the same figures as one JSON object on the last line.
+
+`--new-laws` times the issue-22 pieces (the lead_lowpass filter, the variable law, release detection
+and the passivity controller) against the defaults, alternating in rounds so that both see the same
+machine, and prints both and their ratio.
 
 Target on the 2-core reference machine: p99 <= 100 µs, p99.9 <= 250 µs (a 500 Hz robot leaves 2000 µs a
 cycle).
@@ -14,14 +18,16 @@ cycle).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import gc
 import json
 import platform
 import time
+from typing import Any
 
 import numpy as np
 
-from hoh_cosim.control.controller import HandGuidingController
+from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
 from hoh_cosim.control.frames import R_BS_EQ1, R_SP_SEED
 from hoh_cosim.control.gravity import SEED_TOOL, tool_weight_wrench_S
@@ -54,9 +60,30 @@ def make_inputs(cycles: int, packet_every: int, rng: np.random.Generator) -> lis
     return inputs
 
 
-def run(cycles: int, packet_every: int) -> dict[str, float]:
-    estimator = Estimator(EstimatorParams(ft_rebias_packets=0, probe_rebias_packets=0))
-    controller = HandGuidingController()
+def new_laws() -> tuple[EstimatorParams, ControllerParams]:
+    """The issue-22 pieces, all on."""
+    from hoh_cosim.control.admittance import TRANSLATION_GAINS
+    from hoh_cosim.control.passivity import PassivityParams
+    from hoh_cosim.control.release import ReleaseParams
+
+    return (
+        EstimatorParams(ft_rebias_packets=0, probe_rebias_packets=0, filter="lead_lowpass"),
+        ControllerParams(
+            translation=dataclasses.replace(TRANSLATION_GAINS, law="variable"),
+            release=ReleaseParams(enabled=True),
+            passivity=PassivityParams(enabled=True),
+        ),
+    )
+
+
+def durations_us(
+    cycles: int, packet_every: int, params: tuple[EstimatorParams, ControllerParams] | None = None
+) -> np.ndarray:
+    """Each cycle's duration [µs]: the defaults, or the given parameters."""
+    if params is None:
+        params = (EstimatorParams(ft_rebias_packets=0, probe_rebias_packets=0), ControllerParams())
+    estimator = Estimator(params[0])
+    controller = HandGuidingController(params[1])
     inputs = make_inputs(cycles, packet_every, np.random.default_rng(1))
     p_BT_B = np.array([0.3, 0.0, 0.3])
     durations = np.empty(cycles, dtype=np.int64)
@@ -71,7 +98,10 @@ def run(cycles: int, packet_every: int) -> dict[str, float]:
         controller.step(t, DT, est)
         durations[k] = clock() - start
     gc.unfreeze()
-    us = durations / 1000.0
+    return durations / 1000.0
+
+
+def summary(us: np.ndarray, cycles: int, packet_every: int) -> dict[str, float]:
     return {
         "cycles": cycles,
         "packet_every": packet_every,
@@ -84,11 +114,44 @@ def run(cycles: int, packet_every: int) -> dict[str, float]:
     }
 
 
+def run(cycles: int, packet_every: int) -> dict[str, float]:
+    return summary(durations_us(cycles, packet_every), cycles, packet_every)
+
+
+def compare_new_laws(cycles: int, packet_every: int, rounds: int = 4) -> dict[str, Any]:
+    """The defaults and the new laws in alternating rounds of cycles / rounds each."""
+    per = max(1, cycles // rounds)
+    old, new = [], []
+    for _ in range(rounds):
+        old.append(durations_us(per, packet_every))
+        new.append(durations_us(per, packet_every, new_laws()))
+    a = summary(np.concatenate(old), per * rounds, packet_every)
+    b = summary(np.concatenate(new), per * rounds, packet_every)
+    return {
+        "defaults": a,
+        "new_laws": b,
+        "ratio_p50": round(b["p50_us"] / a["p50_us"], 3),
+        "ratio_p99": round(b["p99_us"] / a["p99_us"], 3),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=100_000)
     parser.add_argument("--packet-every", type=int, default=5)
+    parser.add_argument("--new-laws", action="store_true", help="the new laws against the defaults")
     args = parser.parse_args()
+    if args.new_laws:
+        both = compare_new_laws(args.cycles, args.packet_every)
+        for name in ("defaults", "new_laws"):
+            r = both[name]
+            print(
+                f"{name:>9}: p50 {r['p50_us']:.2f} / p99 {r['p99_us']:.2f} / "
+                f"p99.9 {r['p99_9_us']:.2f} / max {r['max_us']:.2f} µs"
+            )
+        print(f"new/defaults: p50 {both['ratio_p50']}x, p99 {both['ratio_p99']}x")
+        print(json.dumps(both))
+        return
     result = run(args.cycles, args.packet_every)
     print(f"{result['cycles']} cycles, a packet from both sensors every {args.packet_every} ticks")
     for key in ("p50_us", "p99_us", "p99_9_us", "max_us"):

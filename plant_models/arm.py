@@ -4,7 +4,8 @@ Each robot cycle (125 Hz on a CB3, 500 Hz on an e-series):
 1. latency: the command received during the previous cycle becomes the active one (one robot cycle
    of command latency on top of whatever the sender adds);
 2. acceleration: the robot's own TCP twist moves towards the active command by at most a·T (linear)
-   and a_rot·T (angular), speedL's `a` argument;
+   and a_rot·T (angular), speedL's `a` argument; a command to rest may carry its own, larger `a`
+   (the controller's braking after a release), which travels with it through the latency;
 3. joint velocities from the TCP twist by damped least squares, q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ ξ, with λ
    growing from 0 as the smallest singular value of J falls below a threshold (Nakamura and Hanafusa's
    damping): exact away from singularities, bounded near them;
@@ -168,33 +169,45 @@ class SpeedLArm:
         self._publish(self._qdd)
         self.qdd = np.zeros(6)
         self.robot_twist = np.zeros(6)  # the twist the robot is tracking, after the ramp
-        self._queue = [np.zeros(6) for _ in range(self.params.latency_cycles)]
+        self._queue = [(np.zeros(6), 0.0) for _ in range(self.params.latency_cycles)]
         self.active = np.zeros(6)
+        self.active_brake = 0.0
         self._ramp_left = 0.0
         self._svd_at: tuple[Vec, float, float] | None = None  # (J, σ_min, σ_max) of the last SVD
         self._svd = np.zeros(39)  # the same for the compiled cycle: J (36), σ_min, σ_max, taken
         # (what the last computed cycle depended on, what it set)
-        self._cycled: tuple[tuple[bytes, ...], tuple[Any, ...]] | None = None
+        self._cycled: tuple[tuple[Any, ...], tuple[Any, ...]] | None = None
 
     def _publish(self, qdd_mean: list[float]) -> None:
         """New arrays for the joint state: those handed out before keep their values."""
         self.state = np.array(self._q + self._qd + qdd_mean)
         self.q, self.qd, self.qdd_mean = self.state[:6], self.state[6:12], self.state[12:]
 
-    def cycle(self, command: Vec) -> None:
-        """A robot cycle starts: take the (delayed) command, ramp, solve for joint velocities."""
+    def cycle(self, command: Vec, brake_accel: float = 0.0) -> None:
+        """A robot cycle starts: take the (delayed) command, ramp, solve for joint velocities.
+
+        `brake_accel` [m/s²]: speedL's `a` for a command to rest (zero linear velocity), when it
+        exceeds the arm's own `acceleration`; it never applies to a command away from rest."""
         p = self.params
-        self._queue.append(np.array(command, dtype=np.float64))
-        self.active = active = self._queue.pop(0)
+        self._queue.append((np.array(command, dtype=np.float64), float(brake_accel)))
+        active, brake = self._queue.pop(0)
+        self.active, self.active_brake = active, brake
         T = self.period
+        a = p.acceleration
+        if brake > a and not active[:3].any():
+            a = brake
         self._ramp_left = T
         # all the cycle depends on: the command, the twist tracked, q and q̇ (an arm holding still
         # gets the same cycle again)
-        key = (active.tobytes(), self.robot_twist.tobytes(), self.state[:12].tobytes())
+        key = (active.tobytes(), self.robot_twist.tobytes(), self.state[:12].tobytes(), a)
         if self._cycled is not None and self._cycled[0] == key:
             self.robot_twist, self._qdd, self.qdd = self._cycled[1]
             return
         if self._compiled is not None:  # what follows, in one compiled call
+            constants = self._compiled
+            if a != p.acceleration:  # a brake to rest: its own a·T
+                constants = constants.copy()
+                constants[0] = a * T
             out = arm_cycle(
                 self.model,
                 self.tcp,
@@ -202,14 +215,14 @@ class SpeedLArm:
                 active,
                 self.robot_twist,
                 self._svd,
-                self._compiled,
+                constants,
             )
             self.robot_twist, self.qdd = out[:6], out[6:]
             self._qdd = self.qdd.tolist()
             self._cycled = (key, (self.robot_twist, self._qdd, self.qdd))
             return
         self.robot_twist = _step_towards(
-            self.robot_twist, active, p.acceleration * T, p.angular_acceleration * T
+            self.robot_twist, active, a * T, p.angular_acceleration * T
         )
         J = self.model.jacobian(self.q, self.tcp)
         qd = self._joint_velocities(J, self.robot_twist).tolist()

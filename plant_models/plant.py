@@ -54,6 +54,12 @@ class Plant:
     variable_step: ClassVar[bool] = True  # every robot cycle that starts within a step
     inputs: ClassVar[tuple[Port, ...]] = (
         Port("twist_cmd_B", 6, TWIST_UNITS, "speedL command: TCP twist [v; ω] in the base frame"),
+        Port(
+            "brake_accel",
+            1,
+            "m/s2",
+            "speedL's acceleration for a command to rest, if above the arm's own (0: the arm's)",
+        ),
         Port("F_hand_B", 3, "N", "force of the hand on the handle, in B"),
         Port("tau_hand_B", 3, "N.m", "torque of the hand on the handle (about the handle), in B"),
         Port(
@@ -124,7 +130,8 @@ class Plant:
             cycle = math.floor(t / period + 1e-9)
             if cycle != self._cycle:
                 self._cycle = cycle
-                arm.cycle(inputs["twist_cmd_B"])
+                brake = inputs.get("brake_accel")
+                arm.cycle(inputs["twist_cmd_B"], 0.0 if brake is None else float(brake[0]))
             boundary = (cycle + 1) * period
             if boundary >= t + left - 1e-9 * period:  # the same tolerance as the floor's
                 arm.advance(left)

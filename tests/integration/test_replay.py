@@ -222,11 +222,12 @@ def test_replay_with_contact_compensation_off_sets_only_that(log):
             "controller.nope=1",
             "--set controller.nope: unknown parameter of ControllerParams (one of: translation, "
             "rotation, contact_compensation, virtual_fixture, fixture_threshold_N, fixture_up_B, "
-            "limits, use_probe, ft_period_s, probe_period_s)",
+            "limits, release, variable, passivity, use_probe, ft_period_s, probe_period_s)",
         ),
         (
             "estimator.filter=median",
-            "--set estimator.filter: expected one of kalman, steady_kalman, butterworth, "
+            "--set estimator.filter: expected one of kalman, steady_kalman, lead_lowpass, "
+            "butterworth, "
             "one_euro, none, got 'median'",
         ),
     ],

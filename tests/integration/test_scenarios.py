@@ -64,6 +64,7 @@ METRICS = {
         "filter_lag_ms": float,
         "estimate_rms_error_N": float,
         "velocity_hf_rms_m_s": float,
+        "velocity_hf_late_rms_m_s": float,
     },
     "static_noise": {
         "noise_max_abs_raw_N": list,
@@ -147,6 +148,27 @@ def test_the_two_engines_give_the_same_signals():
     assert np.max(np.abs(fmu.values - inprocess.values)) <= 1e-9
     # and the run did something: the hand moved the probe
     assert np.ptp(fmu["plant.p_BT_B"][:, 0]) > 0.01
+
+
+NEW_LAWS = (
+    "estimator.filter=lead_lowpass",
+    "controller.translation.law=variable",
+    "controller.release.enabled=true",
+    "controller.passivity.enabled=true",
+)
+
+
+def test_the_two_engines_agree_with_the_new_laws_through_a_release():
+    """The filter without a peak, the variable law, release braking and the passivity controller
+    through both engines: the same signals, and the release braked (the speedL `a` of the brake
+    travels from the controller to the arm the same way in both)."""
+    scenario = load_scenario(SCENARIOS / "release.yaml", NEW_LAWS, duration_s=6.5)
+    fmu = simulate(scenario, "fmu", progress=False)
+    inprocess = simulate(scenario, "inprocess", progress=False)
+    assert fmu.columns == inprocess.columns
+    assert np.max(np.abs(fmu.values - inprocess.values)) <= 1e-9
+    status = np.rint(fmu["controller.status"][:, 0]).astype(int)
+    assert np.any(status & int(Status.BRAKING)), "no tick braked after the release"
 
 
 def test_same_seed_same_numbers_other_seed_other_noise():

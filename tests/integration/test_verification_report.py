@@ -64,6 +64,7 @@ def test_every_file_is_there(report: Path) -> None:
         "## 6. Linear analysis",
         "## Tuning that beats the seed",
         "## 7. Seed versus us",
+        "## 8. The laws side by side",
     ):
         assert title in md
     # the seed's own figures, quoted beside ours
@@ -99,6 +100,25 @@ def test_the_stability_prediction_holds_in_simulation(report: Path) -> None:
     below = float(rows["stability|0.8"]["velocity_hf_rms_m_s"])
     above = float(rows["stability|1.25"]["velocity_hf_rms_m_s"])
     assert above > 2.0 * below
+
+
+def test_the_laws_side_by_side(report: Path) -> None:
+    """Section 8: the new laws brake after a release (shorter settling than the seed's law), and
+    the stiff, slow operator oscillates with the seed's law but not with the variable law."""
+    import csv
+
+    with (report / "runs.csv").open(encoding="utf-8") as f:
+        rows = {r["tag"]: r for r in csv.DictReader(f)}
+    seed, new = "laws|seed law (defaults)", "laws|new laws, seed gains"
+    for law in (seed, new, "laws|new laws, tuned gains"):
+        for what in ("circles.yaml", "release.yaml", "contact_scan.yaml"):
+            assert rows[f"{law}|{what}"]["status"] == "ok", (law, what)
+    settle = float(rows[f"{seed}|release.yaml"]["release_settle_s"])
+    assert float(rows[f"{new}|release.yaml"]["release_settle_s"]) < 0.5 * settle
+    # over the last circle: a sustained oscillation (tens of mm/s) against one stopped
+    shaky = float(rows[f"{seed}|population|3000|0.25"]["velocity_hf_late_rms_m_s"])
+    calm = float(rows[f"{new}|population|3000|0.25"]["velocity_hf_late_rms_m_s"])
+    assert shaky > 0.02 > 0.005 > calm
 
 
 def test_contact_compensation_and_the_housing(report: Path) -> None:

@@ -175,7 +175,7 @@ def test_fixture_releases_without_contact():
     [
         (
             {"law": "cubic"},
-            r"law: expected one of deadband_linear, isotropic, sigmoid, got 'cubic'",
+            r"law: expected one of deadband_linear, isotropic, sigmoid, variable, got 'cubic'",
         ),
         ({"slope": [0.1, -0.1, 0.1]}, r"slope must be >= 0 on every axis, got \[0.1, -0.1, 0.1\]"),
         ({"deadband": [1.0, 1.0]}, r"deadband: expected 3 values, got 2"),
@@ -188,4 +188,4 @@ def test_gains_reject_bad_values(kwargs, message):
 
 
 def test_every_law_is_listed():
-    assert set(LAWS) == {"deadband_linear", "isotropic", "sigmoid"}
+    assert set(LAWS) == {"deadband_linear", "isotropic", "sigmoid", "variable"}

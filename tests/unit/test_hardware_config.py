@@ -426,7 +426,8 @@ BAD_CONFIGS = [
     ),
     pytest.param(
         "robot: {host: h}\nprobe: null\nestimator: {filter: median}\n",
-        "estimator.filter: expected one of kalman, steady_kalman, butterworth, one_euro, none, "
+        "estimator.filter: expected one of kalman, steady_kalman, lead_lowpass, butterworth, "
+        "one_euro, none, "
         "got 'median'",
         id="estimator-value-rejected",
     ),
@@ -630,7 +631,8 @@ BAD_OVERRIDES = [
     ),
     pytest.param(
         "estimator.filter=median",
-        "--set estimator.filter: expected one of kalman, steady_kalman, butterworth, one_euro, "
+        "--set estimator.filter: expected one of kalman, steady_kalman, lead_lowpass, butterworth, "
+        "one_euro, "
         "none, got 'median'",
         id="estimator-value-rejected",
     ),
@@ -647,3 +649,34 @@ def test_an_override_value_that_is_not_yaml_is_one_line(tmp_path):
     path = write(tmp_path, MINIMAL)
     message = rejection(path, ("estimator.filter=[",))
     assert message.startswith("--set estimator.filter: cannot read the value '[': ")
+
+
+def test_the_new_laws_reach_the_runner_from_the_rig_file(tmp_path):
+    """The filter without a peak, the variable law, release braking and the passivity controller
+    are ordinary estimator and controller parameters of the rig file."""
+    path = write(
+        tmp_path,
+        MINIMAL
+        + "estimator: {filter: lead_lowpass, lead_lowpass: {cutoff_hz: 4.0}}\n"
+        + "controller: {translation: {law: variable}, release: {enabled: true, hold_s: 0.2},"
+        + " passivity: {enabled: true}, limits: {max_brake_accel: 8.0}}\n",
+    )
+    config = load_config(path)
+    assert config.estimator.filter == "lead_lowpass"
+    assert config.estimator.lead_lowpass.cutoff_hz == 4.0
+    assert config.controller.translation.law == "variable"
+    assert config.controller.release.enabled
+    assert config.controller.release.hold_s == 0.2
+    assert config.controller.passivity.enabled
+    assert config.controller.limits.max_brake_accel == 8.0
+
+
+def test_speedl_takes_the_braking_a_only_for_a_command_to_rest():
+    from hoh_cosim.hardware.runner import speedl_acceleration
+
+    rest = np.zeros(6)
+    moving = np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert speedl_acceleration(rest, 1.0, 10.0) == 10.0
+    assert speedl_acceleration(moving, 1.0, 10.0) == 1.0  # never faster away from rest
+    assert speedl_acceleration(rest, 1.0, 0.0) == 1.0  # not braking: the rig's own
+    assert speedl_acceleration(rest, 12.0, 10.0) == 12.0

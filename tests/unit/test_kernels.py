@@ -254,7 +254,8 @@ def test_ur5_kinematics_match_pinocchio():
 
 def test_plant_matches_the_pinocchio_plant():
     """Both plants under the same commands and loads (a moving arm, a cable, a probe mass, the
-    phantom touched), and copies that carry on in place of the originals."""
+    phantom touched, commands to rest braked with speedL's larger `a`), and copies that carry on in
+    place of the originals."""
     params = PlantParams(tool=ToolModel(probe_mass_kg=0.05, cable=CableDrag(enabled=True)))
     pure, compiled = _pure_and_compiled(lambda: Plant(params))
     rng = np.random.default_rng(5)
@@ -262,11 +263,15 @@ def test_plant_matches_the_pinocchio_plant():
     command = np.zeros(6)
     for k in range(4000):
         t = k * 1e-3
+        brake = 0.0
         if k % 8 == 0:
             command = np.concatenate([rng.normal(0, 0.05, 3), rng.normal(0, 0.2, 3)])
             command[2] = -0.04  # down, into the phantom
+        if k % 200 >= 150:  # a release: rest, braked at 10 m/s² (above the arm's own 1.5)
+            command, brake = np.zeros(6), 10.0
         inputs = {
             "twist_cmd_B": command,
+            "brake_accel": np.array([brake]),
             "F_hand_B": rng.normal(0, 3, 3),
             "tau_hand_B": rng.normal(0, 0.2, 3),
             "F_tip_B": np.zeros(3) if k % 500 < 250 else rng.normal(0, 1, 3),

@@ -52,6 +52,7 @@ def _measured(params: EstimatorParams, frequency_hz: float) -> tuple[float, floa
 
 FILTERS = {
     "kalman": EstimatorParams(filter="kalman"),
+    "lead_lowpass": EstimatorParams(filter="lead_lowpass"),
     "butterworth": EstimatorParams(
         filter="butterworth", butterworth=ButterworthParams(order=5, cutoff_hz=5.0)
     ),
@@ -83,6 +84,38 @@ def test_the_default_kalman_leads_and_peaks() -> None:
     gain = np.abs(filter_response(params, OMEGA))
     assert gain.max() == pytest.approx(1.58, abs=0.02)
     assert 1.2 < OMEGA[np.argmax(gain)] / (2 * math.pi) < 2.5
+
+
+def test_the_lead_lowpass_has_no_peak_and_little_lag_at_the_circles() -> None:
+    """The filter without a peak (control/filters.py): gain <= 1.1 at every frequency up to the
+    packets' Nyquist, at most 5 ms behind the held reading at the circles' 0.25 Hz, and a better
+    gain margin than the Kalman filter's on the default loop."""
+    params = EstimatorParams(filter="lead_lowpass")
+    assert np.abs(filter_response(params, OMEGA)).max() <= 1.1
+    w0 = 2 * math.pi * 0.25
+    assert 0.0 < lag_ms(filter_response(params, np.array([w0]))[0], w0) <= 5.0
+    model = LoopModel(0.0125, 300.0, 20.0, 0.15, 0.004, 0.016)
+    lead = loop_margins(model, filter_response(params, OMEGA), OMEGA)
+    kalman = loop_margins(model, filter_response(EstimatorParams(), OMEGA), OMEGA)
+    assert lead.gain_margin >= 2.0 > 1.6 > kalman.gain_margin
+    assert lead.phase_margin_deg >= 45.0
+
+
+def test_the_variable_laws_light_schedule_adds_margin_and_a_heavy_one_takes_it() -> None:
+    """Linearised about the tuned circles' push (about 10 deadbands), the default k = 0.05 is a
+    lead that raises the gain margin over eq. 10's; k = 0.2 lowers it."""
+    from hoh_cosim.control.variable_admittance import VariableAdmittanceParams
+    from hoh_cosim.study.linear import variable_law_lead
+
+    model = LoopModel(0.0145, 300.0, 20.0, 0.15, 0.004, 0.016)
+    g = filter_response(EstimatorParams(filter="lead_lowpass"), OMEGA)
+    excess = 4.8 / 0.45 - 1.0
+
+    def gm(k: float) -> float:
+        lead = variable_law_lead(VariableAdmittanceParams(intent_gain=k), excess, OMEGA)
+        return loop_margins(model, g * lead, OMEGA).gain_margin
+
+    assert gm(0.05) > 2.0 > gm(0.0) > gm(0.2)
 
 
 def test_margins_of_an_integrator_with_delay() -> None:

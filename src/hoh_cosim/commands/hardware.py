@@ -252,6 +252,17 @@ def add_commands(sub: Any) -> None:
         ),
     )
     _add_rt_priority(rehearse, "the loop")
+    rehearse.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="BLOCK.PARAM=VALUE",
+        help=(
+            "override an estimator or controller parameter, as in a rig file (repeatable), e.g. "
+            "controller.release.enabled=true"
+        ),
+    )
 
     campaign = hw_sub.add_parser(
         "campaign",
@@ -503,6 +514,29 @@ def _hw_sensors(args: argparse.Namespace) -> int:
     return 1 if silent else 0
 
 
+def _rehearsal_params(overrides: list[str]) -> tuple[Any, Any]:
+    """The estimator's and controller's parameters with `--set` overrides (None: the defaults)."""
+    if not overrides:
+        return None, None
+    from hoh_cosim.control.controller import ControllerParams
+    from hoh_cosim.control.estimator import EstimatorParams
+    from hoh_cosim.params import override
+    from hoh_cosim.yamlfile import parse_value
+
+    params: dict[str, Any] = {"estimator": EstimatorParams(), "controller": ControllerParams()}
+    for text in overrides:
+        target, sep, value_text = text.partition("=")
+        block, _, param_path = target.partition(".")
+        if not sep or not param_path or block not in params:
+            raise ConfigError(
+                f"--set {text}: expected estimator.parameter=value or controller.parameter=value"
+            )
+        params[block] = override(
+            params[block], param_path, parse_value(text, value_text), f"--set {block}"
+        )
+    return params["estimator"], params["controller"]
+
+
 def _hw_rehearse(args: argparse.Namespace) -> int:
     from hoh_cosim.rehearsal.rehearse import Rehearsal, rehearse
 
@@ -511,6 +545,7 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     log_path = Path(args.log) if args.log else Path("sessions") / f"rehearsal-{_stamp()}.mcap"
     check_writable(log_path.parent, "--log")
     phantom = 0.03 if args.task in CONTACT_TASKS else None
+    estimator, controller = _rehearsal_params(args.overrides)
     setup = Rehearsal(
         seconds=args.seconds,
         log_path=log_path,
@@ -521,6 +556,8 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         phantom_below_m=phantom,
         realtime_priority=args.rt_priority,
         ur_host=args.ur_emulator,
+        estimator=estimator,
+        controller=controller,
     )
     result = rehearse(setup, announce=_announce)
     print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")

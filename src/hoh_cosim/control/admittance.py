@@ -8,6 +8,8 @@ odd, zero at zero and monotone along any axis:
   along a diagonal feels like pushing along an axis: along any single axis it equals eq. 10, in
   between it has none of eq. 10's per-axis "corners". With η equal on every axis the feel does not
   depend on direction at all.
+- `variable` (`hoh_cosim.control.variable_admittance`): eq. 10 whose slope follows the hand's
+  intent, stateful, so the controller steps it; `apply_law` gives its special case, eq. 10.
 - `sigmoid`: the older work's sigmoidal gains (Finocchi, seed refs. 3–4) as a baseline.
   The seed does not give that law's formula; ours is a logistic curve shifted to pass through zero:
       v = sgn(F) · v_max · (σ(k(|F| - F_c)) - σ(-k F_c)) / (1 - σ(-k F_c)),  σ(s) = 1/(1 + e⁻ˢ)
@@ -45,8 +47,8 @@ __all__ = [
     "sigmoid",
 ]
 
-LawName = Literal["deadband_linear", "isotropic", "sigmoid"]
-LAWS: tuple[str, ...] = ("deadband_linear", "isotropic", "sigmoid")
+LawName = Literal["deadband_linear", "isotropic", "sigmoid", "variable"]
+LAWS: tuple[str, ...] = ("deadband_linear", "isotropic", "sigmoid", "variable")
 
 
 def deadband_linear(F: Vec3, slope: Vec3, deadband: Vec3) -> Vec3:
@@ -129,7 +131,7 @@ ROTATION_GAINS = AdmittanceGains(
 
 def apply_law(F: Vec3, gains: AdmittanceGains) -> Vec3:
     """The velocity that `gains.law` gives for the force (or torque) `F`."""
-    if gains.law == "deadband_linear":
+    if gains.law in ("deadband_linear", "variable"):  # variable: its stateless special case
         return deadband_linear(F, gains.slope, gains.deadband)
     if gains.law == "isotropic":
         return isotropic_deadband(F, gains.slope, gains.deadband)

@@ -6,10 +6,15 @@ Per tick:
                stale FT-150 or probe data · probe force at the stop limit (latched)
                                                                   → any of these: zero twist, stop flag
     law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on); v = law(F̃) (eq. 10 or
-               an alternative), ω = law(τ_hand)
+               an alternative: `variable` adapts eq. 10's slope to the hand's intent), ω = law(τ_hand)
+    release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at
+               `max_brake_accel`, until the hand pushes again
+    passivity  the passivity observer and controller with its energy tank
+               (`hoh_cosim.control.passivity`, if on; not while braking): the command yields to
+               the hand when the robot has given back more energy than it took
     fixture    while |F_probe| > threshold no upward motion (3.F.3, if on)
-    limits     the supervisor's `limit_command`: speed clamp · acceleration clamp · probe-force
-               soft cap · workspace box
+    limits     the supervisor's `limit_command`: speed clamp · acceleration clamp (the braking
+               deceleration towards rest after a release) · probe-force soft cap · workspace box
 
 The order puts the hard limits last: the soft force cap and the workspace box override the
 acceleration clamp, never the other way round. The output is a TCP twist [v; ω] in the base frame with
@@ -34,6 +39,8 @@ from hoh_cosim.control.admittance import (
     horizontal_fixture,
 )
 from hoh_cosim.control.block import TWIST_UNITS, Port
+from hoh_cosim.control.passivity import PassivityController, PassivityParams
+from hoh_cosim.control.release import ReleaseDetector, ReleaseParams
 from hoh_cosim.control.supervisor import (
     LATCHED_FLAGS,
     STOP_FLAGS,
@@ -42,11 +49,15 @@ from hoh_cosim.control.supervisor import (
     check_inputs,
     limit_command,
 )
+from hoh_cosim.control.variable_admittance import VariableAdmittance, VariableAdmittanceParams
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, frozen
 
 __all__ = ["ControllerParams", "HandGuidingController"]
 
 _FIXTURE = int(Status.FIXTURE)
+_RELEASED = int(Status.RELEASED)
+_BRAKING = int(Status.BRAKING)
+_PASSIVITY = int(Status.PASSIVITY)
 _LATCHED = int(LATCHED_FLAGS)
 _STOP = int(STOP_FLAGS)
 
@@ -73,6 +84,9 @@ class ControllerParams:
             "fixture_threshold_N",
             "fixture_up_B",
             "limits",
+            "release",
+            "variable",
+            "passivity",
         }
     )
 
@@ -83,6 +97,9 @@ class ControllerParams:
     fixture_threshold_N: float = 1.0  # [N] contact force that engages the fixture
     fixture_up_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 1.0]))  # unit, in B
     limits: LimitParams = field(default_factory=LimitParams)
+    release: ReleaseParams = field(default_factory=ReleaseParams)  # release detection, brake
+    variable: VariableAdmittanceParams = field(default_factory=VariableAdmittanceParams)
+    passivity: PassivityParams = field(default_factory=PassivityParams)
     use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
     ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
@@ -111,6 +128,7 @@ class HandGuidingController:
         Port("probe_age", 1, "s", "time since the last probe-sensor packet"),
         Port("ready", 1, "1", "1 when the estimator's outputs are valid"),
         Port("p_BT_B", 3, "m", "measured TCP position in the base frame"),
+        Port("F_hand_meas_B", 3, "N", "newest compensated, unfiltered wrist force, in B (held)"),
     )
     outputs: ClassVar[tuple[Port, ...]] = (
         Port(
@@ -132,6 +150,12 @@ class HandGuidingController:
             "Status flags of this tick (hoh_cosim.control.supervisor.Status)",
             flags=Status,
         ),
+        Port(
+            "brake_accel",
+            1,
+            "m/s2",
+            "speedL's acceleration while braking to rest after a release, 0 otherwise",
+        ),
     )
 
     def __init__(self, params: ControllerParams | None = None) -> None:
@@ -141,10 +165,14 @@ class HandGuidingController:
     def retune(self, params: ControllerParams) -> None:
         """New parameters without losing the state (latched stops, the last command)."""
         self.params = params
+        if hasattr(self, "_release"):
+            self._release.params = params.release
+            self._variable.params = params.variable
+            self._passivity.params = params.passivity
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
         tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None
-        if tr.law == rot.law and tr.law != "isotropic":
+        if tr.law == rot.law and tr.law not in ("isotropic", "variable"):
             self._law6 = _stack_gains(tr, rot)
         self._box = (
             params.limits.workspace_min_B.tolist(),
@@ -157,6 +185,14 @@ class HandGuidingController:
         self._bits = 0
         self._v_prev = np.zeros(3)
         self._w_prev = np.zeros(3)
+        self._release = ReleaseDetector(self.params.release)
+        self._variable = VariableAdmittance(self.params.variable)
+        self._passivity = PassivityController(self.params.passivity)
+
+    @property
+    def release(self) -> ReleaseDetector:
+        """The release detector and its state (phase, time of the last release)."""
+        return self._release
 
     @property
     def status(self) -> Status:
@@ -178,10 +214,14 @@ class HandGuidingController:
             self._v_prev = np.zeros(3)
             self._w_prev = np.zeros(3)
             self._bits = status
+            self._release.reset()
+            self._variable.reset()
+            self._passivity.reset()
             return {
                 "twist_B": np.zeros(6),
                 "twist_law_B": np.zeros(6),
                 "status": np.array([float(status)]),
+                "brake_accel": _NO_BRAKE,
             }
 
         F_probe = inputs["F_probe_B"]
@@ -192,9 +232,38 @@ class HandGuidingController:
             twist_law = apply_law(np.concatenate([F, inputs["tau_hand_B"]]), self._law6)
             v, w = twist_law[:3], twist_law[3:]
         else:
-            v = apply_law(F, p.translation)
+            if p.translation.law == "variable":
+                v = self._variable.step(
+                    t, F, p.translation.slope, p.translation.deadband, inputs["p_BT_B"]
+                )
+            else:
+                v = apply_law(F, p.translation)
             w = apply_law(inputs["tau_hand_B"], p.rotation)
             twist_law = np.concatenate([v, w])
+
+        braking = False
+        if p.release.enabled or self._release.released:
+            F_raw = inputs.get("F_hand_meas_B")
+            if F_raw is not None and p.use_probe and p.contact_compensation:
+                F_raw = contact_compensated(F_raw, F_probe)
+            braking = self._release.step(
+                t,
+                F,
+                F_raw,
+                p.translation.deadband,
+                bool(twist_law.any()),
+                F_probe if p.use_probe else None,
+            )
+            if braking:
+                v, w = _ZERO3, _ZERO3
+                status |= _RELEASED
+
+        if p.passivity.enabled:
+            dt_po = self._passivity.observe(t, F, inputs["p_BT_B"])
+            if not braking:
+                v, acted = self._passivity.control(v, F, dt_po)
+                if acted:
+                    status |= _PASSIVITY
 
         if p.use_probe and p.virtual_fixture:
             v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, p.fixture_up_B)
@@ -210,6 +279,7 @@ class HandGuidingController:
             inputs["p_BT_B"],
             lim,
             self._box,
+            braking=braking,
         )
         status |= clamped
 
@@ -219,7 +289,12 @@ class HandGuidingController:
             "twist_B": np.concatenate([v, w]),
             "twist_law_B": twist_law,
             "status": np.array([float(status)]),
+            "brake_accel": np.array([lim.max_brake_accel]) if braking else _NO_BRAKE,
         }
+
+
+_ZERO3 = frozen(np.zeros(3))
+_NO_BRAKE = frozen([0.0])
 
 
 def _stack_gains(tr: AdmittanceGains, rot: AdmittanceGains) -> AdmittanceGains:

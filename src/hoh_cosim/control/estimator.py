@@ -46,6 +46,7 @@ from hoh_cosim.control.baselines import (
     ZeroOrderHold,
 )
 from hoh_cosim.control.block import WRENCH_UNITS, Port
+from hoh_cosim.control.filters import LeadLowpassFilter, LeadLowpassParams
 from hoh_cosim.control.frames import R_BS_EQ1, R_SP_SEED
 from hoh_cosim.control.gravity import SEED_TOOL, GravityModel, ToolParams
 from hoh_cosim.control.kalman import KalmanBank, KalmanParams, SteadyStateForceKalman
@@ -89,8 +90,15 @@ __all__ = [
     "make_filter_bank",
 ]
 
-FilterKind = Literal["kalman", "steady_kalman", "butterworth", "one_euro", "none"]
-FILTER_KINDS: tuple[str, ...] = ("kalman", "steady_kalman", "butterworth", "one_euro", "none")
+FilterKind = Literal["kalman", "steady_kalman", "lead_lowpass", "butterworth", "one_euro", "none"]
+FILTER_KINDS: tuple[str, ...] = (
+    "kalman",
+    "steady_kalman",
+    "lead_lowpass",
+    "butterworth",
+    "one_euro",
+    "none",
+)
 
 FT150_NOISE_MAX = frozen([1.15, 1.06, 0.31])
 """[N] The seed's static FT-150 noise, max |noise| on x, y, z (section 4.C). The seed aligned before it
@@ -174,6 +182,7 @@ class EstimatorParams:
     probe_force_kalman: KalmanParams = field(
         default_factory=lambda: default_kalman(FSE103_NOISE_MAX)
     )
+    lead_lowpass: LeadLowpassParams = field(default_factory=LeadLowpassParams)
     butterworth: ButterworthParams = field(default_factory=ButterworthParams)
     one_euro_force: OneEuroParams = field(default_factory=OneEuroParams)
     one_euro_torque: OneEuroParams = field(
@@ -271,6 +280,8 @@ def make_filter_bank(params: EstimatorParams) -> FilterBank:
         return _SeparateFilters(
             [_SteadyKalmanAtFirstStep(k, T) for k, T in zip(kalman, periods, strict=True)]
         )
+    if kind == "lead_lowpass":
+        return _SeparateFilters([LeadLowpassFilter(params.lead_lowpass, T) for T in periods])
     if kind == "butterworth":
         return _SeparateFilters([ButterworthFilter(params.butterworth) for _ in range(3)])
     if kind == "one_euro":

@@ -86,6 +86,9 @@ class Status(enum.IntFlag):
     WORKSPACE = 1 << 2
     FORCE_SOFT_CAP = 1 << 3
     FIXTURE = 1 << 4
+    RELEASED = 1 << 5  # the hand let go: the controller holds the robot at rest
+    BRAKING = 1 << 6  # braking to rest at the braking deceleration
+    PASSIVITY = 1 << 7  # the passivity controller removed motion that would have made energy
     FORCE_STOP = 1 << 8  # latched
     NONFINITE = 1 << 9  # latched
     STALE_FT = 1 << 10
@@ -116,6 +119,9 @@ _DESCRIPTIONS = {
     Status.WORKSPACE: "at the workspace boundary",
     Status.FORCE_SOFT_CAP: "probe force above the soft cap",
     Status.FIXTURE: "virtual fixture engaged",
+    Status.RELEASED: "hand released: holding at rest",
+    Status.BRAKING: "braking to rest",
+    Status.PASSIVITY: "passivity controller acting",
     Status.FORCE_STOP: "probe force above the stop limit (latched)",
     Status.NONFINITE: "non-finite input (latched)",
     Status.STALE_FT: "stale FT-150 data",
@@ -133,6 +139,7 @@ _SPEED_CLAMPED = int(Status.SPEED_CLAMPED)
 _ACCEL_CLAMPED = int(Status.ACCEL_CLAMPED)
 _FORCE_SOFT_CAP = int(Status.FORCE_SOFT_CAP)
 _WORKSPACE = int(Status.WORKSPACE)
+_BRAKING = int(Status.BRAKING)
 
 
 @dataclass(frozen=True)
@@ -142,6 +149,7 @@ class LimitParams:
         "max_angular_speed": "rad/s",
         "max_linear_accel": "m/s2",
         "max_angular_accel": "rad/s2",
+        "max_brake_accel": "m/s2",
         "workspace_min_B": "m",
         "workspace_max_B": "m",
         "probe_force_soft_cap": "N",
@@ -153,6 +161,9 @@ class LimitParams:
     max_angular_speed: float = 0.5  # [rad/s] ~29°/s, a brisk wrist turn
     max_linear_accel: float = 1.0  # [m/s²] 0.1 m/s reached or shed in 0.1 s
     max_angular_accel: float = 5.0  # [rad/s²]
+    # [m/s²] shedding speed towards rest after a release (never speeding up): ur-rtde's speedStop
+    # default; 0.05 m/s is shed in 5 ms over 0.125 mm
+    max_brake_accel: float = 10.0
     workspace_min_B: Vec3 = field(default_factory=lambda: frozen([-0.70, -0.70, 0.0]))  # [m]
     workspace_max_B: Vec3 = field(default_factory=lambda: frozen([0.70, 0.70, 0.80]))  # [m]
     probe_force_soft_cap: float = 20.0  # [N]
@@ -165,6 +176,7 @@ class LimitParams:
             "max_angular_speed",
             "max_linear_accel",
             "max_angular_accel",
+            "max_brake_accel",
             "probe_force_soft_cap",
             "probe_force_stop",
             "stale_periods",
@@ -238,18 +250,29 @@ def limit_command(
     p_BT_B: Vec3,
     limits: LimitParams,
     box: tuple[list[float], list[float]],
+    *,
+    braking: bool = False,
 ) -> tuple[Vec3, Vec3, int]:
     """The law's twist within the limits, and the clamp flags, as an int.
 
     Speed, then acceleration (from the last command), then the probe-force soft cap (without a
     probe sensor `F_probe_B` is None) and the workspace box (`box`: its corners as lists): the hard
-    limits last, so they override the acceleration clamp, never the other way round."""
+    limits last, so they override the acceleration clamp, never the other way round.
+
+    `braking`: the hand let go and the command is rest (v = 0): the linear speed may be shed at
+    `max_brake_accel` (flag BRAKING while it is). Only towards rest: any other command is clamped
+    at `max_linear_accel`, so no rule lets the robot speed up faster."""
     status = 0
     v, hit_v = clamp_speed(v, limits.max_linear_speed)
     w, hit_w = clamp_speed(w, limits.max_angular_speed)
     if hit_v or hit_w:
         status |= _SPEED_CLAMPED
-    v, hit_v = clamp_acceleration(v, v_prev, dt, limits.max_linear_accel)
+    if braking and not v.any():
+        if v_prev.any():
+            status |= _BRAKING
+        v, hit_v = clamp_acceleration(v, v_prev, dt, limits.max_brake_accel)
+    else:
+        v, hit_v = clamp_acceleration(v, v_prev, dt, limits.max_linear_accel)
     w, hit_w = clamp_acceleration(w, w_prev, dt, limits.max_angular_accel)
     if hit_v or hit_w:
         status |= _ACCEL_CLAMPED

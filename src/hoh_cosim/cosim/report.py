@@ -11,7 +11,9 @@ parameters (the truth the simulation knows); none is a constant. A metric that t
   aligned measurement at the circle's frequency (the seed's "lag added by the filter", ~10 ms);
   `estimate_rms_error_N` RMS magnitude of filtered estimate minus true hand force;
   `velocity_hf_rms_m_s` RMS of the tip's velocity above 4x the circle frequency (zero-phase
-  high-pass): the jitter and the oscillation a loop near its stability limit adds. Also
+  high-pass): the jitter and the oscillation a loop near its stability limit adds, and
+  `velocity_hf_late_rms_m_s` the same over the last whole circle only: whether an oscillation is
+  sustained to the end or was stopped (by the variable law's oscillation watch). Also
   `estimate_lag_ms`: the filtered estimate behind the true force (sensor latency, packets, filter).
   A negative lag is a lead: the constant-acceleration filter extrapolates between packets, and the
   held raw reading is itself half a packet period late on average.
@@ -151,6 +153,7 @@ def _circles(scenario: Scenario, rec: Recording, report: Report) -> None:
                     "estimate_lag_ms",
                     "estimate_rms_error_N",
                     "velocity_hf_rms_m_s",
+                    "velocity_hf_late_rms_m_s",
                 )
             )
         )
@@ -168,11 +171,11 @@ def _circles(scenario: Scenario, rec: Recording, report: Report) -> None:
     m["filter_lag_ms"] = 1e3 * lag_in_window(t, raw[:, axes], estimate[:, axes], frequency)
     m["estimate_lag_ms"] = 1e3 * lag_in_window(t, hand[:, axes], estimate[:, axes], frequency)
     m["estimate_rms_error_N"] = _rms_norm(estimate - hand)
-    m["velocity_hf_rms_m_s"] = _rms_norm(
-        high_passed(
-            _signal(rec, plant, "twist_B")[window, :3], HF_FACTOR * frequency, scenario.dt_s
-        )
+    hf = high_passed(
+        _signal(rec, plant, "twist_B")[window, :3], HF_FACTOR * frequency, scenario.dt_s
     )
+    m["velocity_hf_rms_m_s"] = _rms_norm(hf)
+    m["velocity_hf_late_rms_m_s"] = _rms_norm(hf[t >= t[-1] - p.period_s])
 
 
 def _ready_window(rec: Recording, est: ComponentSpec, report: Report, what: str) -> np.ndarray:

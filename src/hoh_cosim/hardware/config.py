@@ -24,7 +24,9 @@
       timeout_s: 15.0
     estimator: {...}              # EstimatorParams overrides (the tool comes from the calibration);
                                   # its packet periods and use_probe are the rig's, for both blocks
-    controller: {...}             # ControllerParams overrides (gains, limits, fixture, ...)
+    controller: {...}             # ControllerParams overrides (gains, limits, fixture, ...), e.g.
+                                  # {translation: {law: variable}, release: {enabled: true},
+                                  #  passivity: {enabled: true}}; estimator: {filter: lead_lowpass}
     log_dir: sessions             # session logs (MCAP), path from this file
     stale_stop_s: 0.25            # a stream silent this long ends the session; a shorter gap
                                   # (over 3 packet periods) only makes the command zero

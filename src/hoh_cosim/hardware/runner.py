@@ -58,7 +58,15 @@ from hoh_cosim.hardware.session_log import CycleRecord, SessionLog, at_log_resol
 from hoh_cosim.hardware.streams import Mailbox, RateCheck, ReaderThread, Sample, robust_period
 from hoh_cosim.params import leaves
 
-__all__ = ["CycleTiming", "LatencyHistogram", "Rebias", "Runner", "SessionResult", "Source"]
+__all__ = [
+    "CycleTiming",
+    "LatencyHistogram",
+    "Rebias",
+    "Runner",
+    "SessionResult",
+    "Source",
+    "speedl_acceleration",
+]
 
 
 class Source(Protocol):
@@ -491,7 +499,14 @@ class Runner:
                 if cause is not None:  # logged as it was: nothing sent
                     cycle.verdict = Verdict(cycle.verdict.status, np.zeros(6), cause)
             if cause is None:
-                self.robot.speed_l(cycle.verdict.twist_B, self.config.robot.acceleration)
+                self.robot.speed_l(
+                    cycle.verdict.twist_B,
+                    speedl_acceleration(
+                        cycle.verdict.twist_B,
+                        self.config.robot.acceleration,
+                        float(cycle.command["brake_accel"][0]),
+                    ),
+                )
                 self.robot.kick_watchdog()
                 self._commanded_s = time.perf_counter()
             compute = time.perf_counter() - start
@@ -620,3 +635,13 @@ def _parameters_json(
             "probe_bias": rebias.probe_bias.tolist(),
         }
     )
+
+
+def speedl_acceleration(twist_B: np.ndarray, acceleration: float, brake_accel: float) -> float:
+    """speedL's `a` for one command: the rig's `acceleration`, or the controller's braking
+    deceleration after a release when that is larger and the command is rest (zero linear
+    velocity). Never a larger `a` for a command away from rest: the controller's own clamp ramps
+    such a command, and the robot follows it no faster than the rig allows."""
+    if brake_accel > acceleration and not np.any(twist_B[:3]):
+        return brake_accel
+    return acceleration

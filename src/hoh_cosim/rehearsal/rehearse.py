@@ -137,6 +137,7 @@ class Rehearsal:
     task_start_s: float | None = None  # None: once the runner says its rebias is done
     phantom_below_m: float | None = None
     controller: ControllerParams | None = None
+    estimator: EstimatorParams | None = None
     seed: int = 1
     realtime_priority: int | None = LOOP_PRIORITY  # None: the default priority
     ur_host: str | None = None
@@ -177,6 +178,7 @@ def rehearse(
             world,
             setup.log_path.parent,
             rebias_samples=setup.rebias_samples,
+            estimator=setup.estimator,
             controller=setup.controller,
             realtime_priority=setup.realtime_priority,
         )

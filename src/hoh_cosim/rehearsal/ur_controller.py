@@ -270,6 +270,7 @@ class _Emulator:
         self.protective = self.emergency = False
         self.executing = False
         self.speed_l_active = False
+        self.acceleration = 0.0  # speedL's a of the last speedL
         self.last_cmd = -1
         self.silent_until = 0.0
         self.outbox: list[tuple[str, str, int]] = []
@@ -376,8 +377,10 @@ class _Emulator:
     # --- the arm --------------------------------------------------------------------------------
 
     def _command(self, twist: np.ndarray) -> None:
-        """The twist the arm model follows (the world's speedL input)."""
-        self.world._command.write(np.concatenate([twist, [STOP_DECELERATION]]), slice(0, 7))
+        """The twist the arm model follows (the world's speedL input), with speedL's `a` while
+        speedL runs (the arm takes it only to brake to rest), else the stops' deceleration."""
+        a = self.acceleration if self.speed_l_active else STOP_DECELERATION
+        self.world._command.write(np.concatenate([twist, [a]]), slice(0, 7))
 
     def _halt(self, why: str) -> None:
         """The program stops and the arm with it (lock held)."""
@@ -475,6 +478,7 @@ class _Emulator:
         d = [float(self.inputs[f"input_double_register_{i}"]) for i in range(8)]
         if cmd == CMD_SPEEDL:
             self.twist = np.array(d[:6])
+            self.acceleration = d[6]  # speedL's a (register 6; 7 is its time)
             self.speed_l_active = True
         elif cmd == CMD_SPEED_STOP:
             self.twist = np.zeros(6)

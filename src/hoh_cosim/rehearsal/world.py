@@ -62,6 +62,7 @@ WORLD_DT = 1e-3
 # p, R, twist, [mode, safety, protective, emergency, program, time], q, qd, the TCP's wrench,
 # the orientation as a rotation vector (as RTDE gives it; computed here, not in the runner's loop)
 _STATE = 3 + 9 + 6 + 6 + 6 + 6 + 6 + 3
+_NO_ACCELERATION = np.zeros(1)
 _COMMAND = 6 + 4 + 1  # twist, [acceleration, kick time, stop, sequence], the task's go
 TASK_LEAD_S = 0.5
 """[s] With no `task_start_s`, the hand takes the handle this long after `start_task()`."""
@@ -173,6 +174,7 @@ class _World:
         self.operator = Operator(OperatorParams(task=setup.task, start_s=start))
         self.task_held = setup.task_start_s is None
         self.go = False
+        self._acceleration = np.zeros(1)  # speedL's a of the last command
         rng = np.random.default_rng(setup.seed)
         self.ft = FT150Sensor(FT150Params(rate_hz=setup.ft_rate_hz), rng=rng)
         self.probe = FSE103Sensor(FSE103Params(), rng=rng)
@@ -306,12 +308,14 @@ class _World:
     def _command(self, now: float) -> Vec:
         c = self.command.read()
         twist, kick, stop = c[:6], c[7], c[8]
+        self._acceleration = c[6:7]
         self.go = c[10] > 0.5
         if stop > 0.5:
             self.program_stopped = True
         if kick > 0.0 and now - kick > 1.0 / self.setup.watchdog_hz:
             self.program_stopped = True  # the watchdog: the program on the robot halts
         if self.program_stopped or self.protective:
+            self._acceleration = _NO_ACCELERATION  # the stop as before: the arm's own ramp
             return np.zeros(6)
         return twist
 
@@ -380,6 +384,9 @@ class _World:
             WORLD_DT,
             {
                 "twist_cmd_B": twist,
+                # speedL's a as sent: the arm takes it for a command to rest when it brakes
+                # harder than the arm's own acceleration (a release), never otherwise
+                "brake_accel": self._acceleration,
                 "F_hand_B": hand["F_hand_B"],
                 "tau_hand_B": hand["tau_hand_B"],
                 "F_tip_B": hand["F_tip_B"],

@@ -11,6 +11,8 @@ held), which is what the seed's "lag added by the filter" compares against (Fig.
   y being the mean of the N tick outputs after the packet: the held raw reading spans the same ticks,
   so the ratio of the two at a frequency is the filter's gain and phase against it, exactly.
 - Butterworth: its transfer function at the tick rate, run on the held reading: exact.
+- lead_lowpass (`hoh_cosim.control.filters`): its two first-order sections at the packet rate, run
+  once per packet and held like the raw reading: exact.
 - 1€ (Casiez et al.): an exponential smoother per packet whose cutoff rises with the signal's speed,
   fc = min_cutoff + β |ẋ|. Linearised at a given speed (for a sinusoid of amplitude a at f, the mean
   |ẋ| = 4 a f), it is the first-order system y_k = y_{k-1} + α (z_k - y_{k-1}) at the packet rate.
@@ -42,6 +44,7 @@ import numpy as np
 
 from hoh_cosim.control.baselines import one_euro_alpha
 from hoh_cosim.control.estimator import FILTER_KINDS, EstimatorParams, FilterKind
+from hoh_cosim.control.filters import lead_lowpass_sections
 from hoh_cosim.control.kalman import (
     H_FORCE,
     KalmanParams,
@@ -59,6 +62,7 @@ __all__ = [
     "loop_margins",
     "loop_model",
     "open_loop",
+    "variable_law_lead",
 ]
 
 OMEGA = np.logspace(-2, math.log10(0.98 * math.pi / 0.005), 3000)
@@ -94,6 +98,15 @@ def _butterworth_system(
     return control.tf(b, a, dt)
 
 
+def _lead_lowpass_system(
+    params: EstimatorParams, axis: int, dt: float, ticks: int, signal_speed: float
+):
+    import control
+
+    (b0, b1, a1), (c0, c1, d1) = lead_lowpass_sections(params.lead_lowpass, dt * ticks)
+    return control.tf(np.polymul([b0, b1], [c0, c1]), np.polymul([1.0, a1], [1.0, d1]), dt * ticks)
+
+
 def _one_euro_system(
     params: EstimatorParams, axis: int, dt: float, ticks: int, signal_speed: float
 ):
@@ -116,6 +129,7 @@ def _no_system(params: EstimatorParams, axis: int, dt: float, ticks: int, signal
 _FILTER_SYSTEMS: dict[FilterKind, Callable[[EstimatorParams, int, float, int, float], Any]] = {
     "kalman": _kalman_system,
     "steady_kalman": _kalman_system,
+    "lead_lowpass": _lead_lowpass_system,
     "butterworth": _butterworth_system,
     "one_euro": _one_euro_system,
     "none": _no_system,
@@ -162,6 +176,13 @@ def filter_response(
         )
     response = control.frequency_response(system, omega)
     return np.asarray(response.complex).reshape(-1)
+
+
+def variable_law_lead(params, excess: float, omega: np.ndarray) -> np.ndarray:
+    """The variable law's schedule (`hoh_cosim.control.variable_admittance`) linearised about a
+    steady push of `excess` deadbands beyond the deadband: 1 + (k e₀ / ė_ref) iω, a factor of the
+    loop L(iω) (the slope's own g is 1 in a steady push)."""
+    return 1.0 + (params.intent_gain * excess / params.intent_rate_per_s) * 1j * omega
 
 
 def lag_ms(response: complex, omega: float) -> float:

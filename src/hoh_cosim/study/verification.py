@@ -166,6 +166,32 @@ def _filter_settings(s: ReportSettings, base_q: np.ndarray) -> dict[str, tuple[s
     return settings
 
 
+LAW_SETS: dict[str, tuple[str, ...]] = {
+    "seed law (defaults)": (),
+    "new laws, seed gains": (
+        "estimator.filter=lead_lowpass",
+        "controller.translation.law=variable",
+        "controller.release.enabled=true",
+        "controller.passivity.enabled=true",
+    ),
+    "new laws, tuned gains": (
+        "estimator.filter=lead_lowpass",
+        "controller.translation.law=variable",
+        "controller.release.enabled=true",
+        "controller.passivity.enabled=true",
+        "controller.translation.slope=[0.0145,0.0145,0.0145]",
+        "controller.translation.deadband=[0.45,0.45,0.25]",
+    ),
+}
+"""The laws the report puts side by side: the seed's law with today's defaults, the issue-22
+pieces (filter without a peak, variable law, release braking, passivity controller) with the
+seed's gains, and with the gains tuned for effort at a 2.0 gain margin (`docs/decisions.md`)."""
+
+POPULATION = ((300.0, 0.15), (1000.0, 0.15), (3000.0, 0.25))
+"""[N/m], [s] Operators of the population the report runs each law set with (studies/population.yaml
+runs the whole grid)."""
+
+
 def _family(label: str) -> str:
     return label.split(" ")[0]
 
@@ -340,6 +366,24 @@ def build_report(
             duration_s=s.release_s,
             keep=RELEASE_SIGNALS,
         )
+    for law, overrides in LAW_SETS.items():
+        for scenario, duration in (
+            ("circles.yaml", s.circles_s),
+            ("release.yaml", s.release_s),
+            ("contact_scan.yaml", s.contact_s),
+        ):
+            batch.add(f"laws|{law}|{scenario}", scenario, overrides, duration_s=duration)
+        for stiffness, delay in _population(s):
+            batch.add(
+                f"laws|{law}|population|{stiffness:g}|{delay:g}",
+                "circles.yaml",
+                (
+                    *overrides,
+                    set_option("operator.stiffness", stiffness),
+                    set_option("operator.reaction_delay_s", delay),
+                ),
+                duration_s=s.circles_s,
+            )
     critical = linear["default_margins"].critical_slope
     for factor in (0.8, 1.25):
         a = critical * factor
@@ -391,6 +435,7 @@ def build_report(
         _tuning_section(evaluations, figures),
     ]
     sections.append(_seed_versus_us(got, s, evaluations))
+    sections.append(_laws_section(got, circles, s))
     failed = [(t, o.error) for t, o in got.items() if not o.ok]
     summary = _summary(got, s, linear, evaluations, failed, time.perf_counter() - started)
 
@@ -768,6 +813,86 @@ def _release(got, s, figures) -> Section:
     figures["release.png"] = png(fig)
     sec.figures.append(("release.png", "tip speed around the release"))
     sec.tables.append(Table("release", ["filter", "drift [mm]", "settle [s]"], rows))
+    return sec
+
+
+def _population(s: ReportSettings) -> tuple[tuple[float, float], ...]:
+    """The operators the report runs: all of POPULATION, the stiff and slow one alone if quick."""
+    return POPULATION[-1:] if s.quick else POPULATION
+
+
+def _law_margin(circles, overrides: Sequence[str], push_N: float | None) -> float:
+    """The default operator's loop gain margin for a law set: its filter, its slope, and for the
+    variable law its schedule linearised about the circles' push (`variable_law_lead`)."""
+    from hoh_cosim.control.controller import ControllerParams
+    from hoh_cosim.cosim.scenario import load_scenario
+    from hoh_cosim.study.linear import variable_law_lead
+
+    scenario = load_scenario(circles.path, tuple(overrides))
+    est = scenario.component_of_kind("estimator").params
+    ctl: ControllerParams = scenario.component_of_kind("controller").params
+    gain = filter_response(est, OMEGA)
+    if ctl.translation.law == "variable" and push_N is not None:
+        eta = float(ctl.translation.deadband[0])
+        excess = max(0.0, push_N / eta - 1.0) if eta > 0 else 0.0
+        gain = gain * variable_law_lead(ctl.variable, excess, OMEGA)
+    return loop_margins(loop_model(scenario), gain, OMEGA).gain_margin
+
+
+def _laws_section(got, circles, s: ReportSettings) -> Section:
+    sec = Section("8. The laws side by side")
+    sec.text.append(
+        "The seed's law with today's defaults against the new pieces (the filter without a gain "
+        "peak, the variable law, release braking, the passivity controller), with the seed's gains "
+        "and with gains tuned for effort: circles (effort and path error), release (drift and "
+        "settling), the contact scan (spread of the contact force), the default operator's gain "
+        "margin (python-control, the variable law linearised about the circles' push), and the "
+        "tip's velocity above 1 Hz over the last circle for a relaxed, a stiff and a stiff and "
+        "slow operator (a sustained oscillation when tens of mm/s). `hoh-cosim sweep studies/population.yaml` runs "
+        "the whole population."
+    )
+    rows = []
+    for law, overrides in LAW_SETS.items():
+        c = got[f"laws|{law}|circles.yaml"]
+        r = got[f"laws|{law}|release.yaml"]
+        k = got[f"laws|{law}|contact_scan.yaml"]
+        pop = [
+            _f(
+                _metric(got[f"laws|{law}|population|{a:g}|{b:g}"], "velocity_hf_late_rms_m_s"),
+                ".3g",
+                1e3,
+            )
+            for a, b in _population(s)
+        ]
+        rows.append(
+            [
+                law,
+                _f(_metric(c, "hand_force_rms_N"), ".3g"),
+                _f(_metric(c, "path_rms_error_m"), ".3g", 1e3),
+                _f(_metric(r, "release_drift_m"), ".3g", 1e3),
+                _f(_metric(r, "release_settle_s"), ".3g", 1e3),
+                _f(_metric(k, "contact_force_std_N"), ".3g"),
+                _f(_law_margin(circles, overrides, _metric(c, "hand_force_rms_N")), ".3g"),
+                " / ".join(pop),
+            ]
+        )
+    operators = ", ".join(f"{a:g} N/m {1e3 * b:g} ms" for a, b in _population(s))
+    sec.tables.append(
+        Table(
+            "laws",
+            [
+                "law",
+                "hand force RMS [N]",
+                "path error RMS [mm]",
+                "release drift [mm]",
+                "settle [ms]",
+                "contact force std [N]",
+                "gain margin",
+                f"velocity above 1 Hz, last circle [mm/s] ({operators})",
+            ],
+            rows,
+        )
+    )
     return sec
 
 

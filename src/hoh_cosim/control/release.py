@@ -1,0 +1,194 @@
+"""Release detection: the hand lets go of the handle, and the robot brakes to rest (seed 000, 5.C).
+
+The seed's users felt "inertia" when they let go: the filtered force fell through the deadband of
+eq. 10 tens of milliseconds after the hand did, and the command then ramped down at the
+acceleration limit. This block tells a release from ordinary steering early and says so; the
+controller then commands rest with the braking deceleration (`LimitParams.max_brake_accel`).
+
+Per controller tick, with F̂ the filtered hand force (contact-compensated, eq. 11-12), F_raw the
+newest unfiltered packet (compensated the same way), η the deadband of eq. 10 and ‖x‖_η = ‖x ⊘ η‖
+(axes with η = 0 left out):
+
+    trend       n = ‖F̂‖_η ,   ṅ = (n - n_prev) / Δt
+    release     guiding  and  ‖F_raw‖_b <= 1  and  n + h ṅ <= 1  and  ṅ <= -ṅ_min
+                with b = max(η, raw_band_N) per axis: the raw packet's own noise band, so that a
+                narrow deadband does not wait for a quiet packet
+                (the newest packet is already back inside that band, the estimate is falling
+                fast and will be inside within the horizon h: the hand has let go; a light push
+                whose raw packet dips into the deadband by noise is not falling fast)
+    hold        released: the command is rest until a push that grows (ṅ > 0) and that the raw
+                packet confirms above its noise band (‖F_raw‖_b > 1) is either firm, n > k_re
+                (re-engage at once), or
+                outside the deadband, n > 1, after hold_s: neither the estimate still falling
+                after the release nor the filter's undershoot, which falls back towards zero,
+                moves the robot again
+
+The trend of the estimate is the "release detection" of the literature on variable admittance
+(Lecours, Mayer-St-Onge and Gosselin, ICRA 2012: the operator's intent read from the sign of the
+acceleration of the motion they ask for: decelerating means stopping); here the force's own fall,
+confirmed by the raw packet, decides before the filtered force reaches the deadband.
+
+State: the phase (`ReleasePhase`): IDLE (no motion asked), GUIDING (the law commands motion),
+RELEASED_AIR or RELEASED_CONTACT (the hand let go with the probe in the air or in contact with the
+patient). Both released phases brake to rest now; the contact one is kept apart so that a later
+controller can hold the contact force instead.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hoh_cosim.control.vectors import Vec3, as_nonnegative_vector, as_scalar, frozen
+
+__all__ = ["ReleaseDetector", "ReleaseParams", "ReleasePhase", "scaled_norm"]
+
+
+class ReleasePhase(enum.IntEnum):
+    """Where the hand is, as the release detector sees it."""
+
+    IDLE = 0  # no motion asked: the force is inside the deadband
+    GUIDING = 1  # the law commands motion
+    RELEASED_AIR = 2  # the hand let go, the probe in the air: brake to rest
+    RELEASED_CONTACT = 3  # the hand let go with the probe on the patient: brake to rest (for now)
+
+    @property
+    def released(self) -> bool:
+        return self >= ReleasePhase.RELEASED_AIR
+
+
+@dataclass(frozen=True)
+class ReleaseParams:
+    """When a fall of the hand force counts as letting go, and how the brake lets go again.
+
+    enabled: False keeps the seed's behaviour (the command follows the law down through the
+        deadband at the acceleration limit).
+    horizon_s: h, how far ahead the estimate's trend is extrapolated.
+    min_fall_per_s: ṅ_min [1/s], the fall of ‖F̂‖_η (deadbands per second) that counts as letting
+        go: 20/s is a 5 N push on η = 0.95 N gone within a quarter second.
+    hold_s: how long the brake holds unless a firm push (‖F̂‖_η > reengage_factor) comes.
+    reengage_factor: k_re, a push this many deadbands strong ends the hold at once.
+    contact_threshold_N: probe contact force above which a release is RELEASED_CONTACT.
+    raw_band_N: [N] per base axis, the raw packet's noise band (the FT-150's max |noise|, about
+        1.15, 1.06, 0.31 N, seed 4.C): inside max(η, this) a packet counts as "no push".
+    """
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "horizon_s": "s",
+        "min_fall_per_s": "1/s",
+        "hold_s": "s",
+        "reengage_factor": "1",
+        "contact_threshold_N": "N",
+        "raw_band_N": "N",
+    }
+
+    enabled: bool = False
+    horizon_s: float = 0.05
+    min_fall_per_s: float = 20.0
+    hold_s: float = 0.15
+    reengage_factor: float = 2.0
+    contact_threshold_N: float = 1.0
+    raw_band_N: Vec3 = field(default_factory=lambda: frozen([1.15, 1.15, 0.31]))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "raw_band_N", as_nonnegative_vector(self.raw_band_N, 3, "raw_band_N")
+        )
+        for name in ("horizon_s", "hold_s", "contact_threshold_N"):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
+        object.__setattr__(
+            self,
+            "min_fall_per_s",
+            as_scalar(self.min_fall_per_s, "min_fall_per_s", low=0.0, low_open=True),
+        )
+        object.__setattr__(
+            self, "reengage_factor", as_scalar(self.reengage_factor, "reengage_factor", low=1.0)
+        )
+
+
+def scaled_norm(F: Vec3, deadband: Vec3) -> float:
+    """‖F ⊘ η‖ over the axes with η > 0: 1 on the deadband's ellipsoid, below 1 inside it."""
+    total = 0.0
+    for f, eta in zip(F.tolist(), deadband.tolist(), strict=True):
+        if eta > 0.0:
+            total += (f / eta) ** 2
+    return math.sqrt(total)
+
+
+class ReleaseDetector:
+    """The release detector's state machine (module docstring), stepped at the controller's rate."""
+
+    def __init__(self, params: ReleaseParams | None = None) -> None:
+        self.params = params or ReleaseParams()
+        self.reset()
+
+    def reset(self) -> None:
+        self.phase = ReleasePhase.IDLE
+        self.t_release: float | None = None
+        self._t_prev: float | None = None
+        self._n_prev = 0.0
+        self.releases = 0  # how many times the hand let go since the reset
+        self._band_key: tuple[int, int] | None = None
+        self._band_value = np.zeros(3)
+
+    @property
+    def released(self) -> bool:
+        return self.phase.released
+
+    def _band(self, deadband: Vec3) -> Vec3:
+        """b = max(η, raw_band_N), kept while η and the parameters stay the same objects."""
+        key = (id(deadband), id(self.params))
+        if self._band_key != key:
+            self._band_key, self._band_value = key, np.maximum(deadband, self.params.raw_band_N)
+            self._band_of = (deadband, self.params)  # keeps the ids valid
+        return self._band_value
+
+    def step(
+        self,
+        t: float,
+        F: Vec3,
+        F_raw: Vec3 | None,
+        deadband: Vec3,
+        commanding: bool,
+        F_probe: Vec3 | None = None,
+    ) -> bool:
+        """One controller tick: `F` the filtered (compensated) hand force, `F_raw` the newest
+        unfiltered packet compensated the same way (None: not available, the estimate decides
+        alone), `commanding` whether the law asks for motion, `F_probe` the probe contact force
+        (None: no probe sensor). Returns whether the controller must hold the robot at rest."""
+        p = self.params
+        n = scaled_norm(F, deadband)
+        dt = None if self._t_prev is None else t - self._t_prev
+        # ṅ = (‖F̂‖_η - ‖F̂_prev‖_η)/Δt: the trend of the force's size, not of each axis (an
+        # axis's noise extrapolated over the horizon would look like a push)
+        n_dot = (n - self._n_prev) / dt if dt is not None and dt > 0.0 else 0.0
+        b_raw = None if F_raw is None else scaled_norm(F_raw, self._band(deadband))
+        self._t_prev, self._n_prev = t, n
+
+        if self.phase.released:
+            assert self.t_release is not None
+            growing = n_dot > 0.0 and (b_raw is None or b_raw > 1.0)
+            held = t - self.t_release >= p.hold_s - 1e-9
+            if not (growing and (n > p.reengage_factor or (held and n > 1.0))):
+                return True
+            self.phase = ReleasePhase.GUIDING
+            self.t_release = None
+            return False
+
+        if p.enabled and self.phase == ReleasePhase.GUIDING:
+            raw_inside = b_raw is None or b_raw <= 1.0
+            # n + h ṅ <= 1: inside the deadband within the horizon
+            if raw_inside and n + p.horizon_s * n_dot <= 1.0 and n_dot <= -p.min_fall_per_s:
+                contact = (
+                    F_probe is not None and float(F_probe.dot(F_probe)) > p.contact_threshold_N**2
+                )
+                self.phase = ReleasePhase.RELEASED_CONTACT if contact else ReleasePhase.RELEASED_AIR
+                self.t_release = t
+                self.releases += 1
+                return True
+        self.phase = ReleasePhase.GUIDING if commanding else ReleasePhase.IDLE
+        return False

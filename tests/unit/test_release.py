@@ -1,0 +1,151 @@
+"""Release detection (control/release.py) and the controller's brake to rest."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hoh_cosim.control.controller import ControllerParams, HandGuidingController
+from hoh_cosim.control.release import ReleaseDetector, ReleaseParams, ReleasePhase, scaled_norm
+from hoh_cosim.control.supervisor import LimitParams, Status
+from hoh_cosim.errors import ConfigError
+from tests.estimates import controller_inputs
+
+DT = 0.008  # a CB3's controller period
+ETA = np.array([0.95, 0.95, 0.25])
+
+
+def released_controller(**release) -> HandGuidingController:
+    return HandGuidingController(ControllerParams(release=ReleaseParams(enabled=True, **release)))
+
+
+def push_then_fall(ctl, fall_N_per_s: float, raw_after: float = 0.0, ticks_after: int = 10):
+    """5 N on x for 1 s, then the estimate falls at `fall_N_per_s` while the raw packet reads
+    `raw_after`; the outputs of every tick after the fall starts."""
+    k = 0
+    for _ in range(int(1.0 / DT)):
+        ctl.step(k * DT, DT, controller_inputs(F_hand_B=[5.0, 0, 0], F_hand_meas_B=[5.0, 0, 0]))
+        k += 1
+    outs = []
+    F = 5.0
+    for _ in range(ticks_after):
+        F = max(0.0, F - fall_N_per_s * DT)
+        outs.append(
+            ctl.step(
+                k * DT, DT, controller_inputs(F_hand_B=[F, 0, 0], F_hand_meas_B=[raw_after, 0, 0])
+            )
+        )
+        k += 1
+    return outs
+
+
+def test_scaled_norm_is_one_on_the_deadband_and_skips_zero_axes():
+    assert scaled_norm(np.array([0.95, 0.0, 0.0]), ETA) == pytest.approx(1.0)
+    assert scaled_norm(np.array([0.0, 0.0, 0.25]), ETA) == pytest.approx(1.0)
+    assert scaled_norm(np.array([3.0, 0.0, 0.0]), np.array([0.0, 1.0, 1.0])) == 0.0
+
+
+def test_a_fast_fall_with_the_raw_packet_inside_brakes_at_once():
+    ctl = released_controller()
+    outs = push_then_fall(ctl, fall_N_per_s=120.0)
+    first = outs[0]
+    # the first tick of the fall: the estimate (4 N) is still far outside the deadband, but the
+    # packet is inside and the trend gets there within the horizon: rest, braked
+    assert Status(int(first["status"][0])) & Status.RELEASED
+    assert Status(int(first["status"][0])) & Status.BRAKING
+    np.testing.assert_array_equal(first["twist_B"], 0.0)
+    assert first["brake_accel"][0] == LimitParams().max_brake_accel
+    assert ctl.release.phase == ReleasePhase.RELEASED_AIR
+    # it holds while the estimate keeps falling, with no braking once at rest
+    later = outs[3]
+    np.testing.assert_array_equal(later["twist_B"], 0.0)
+    assert not Status(int(later["status"][0])) & Status.BRAKING
+
+
+def test_the_seeds_behaviour_when_disabled_ramps_down_at_the_acceleration_limit():
+    ctl = HandGuidingController()
+    outs = push_then_fall(ctl, fall_N_per_s=60.0)
+    # eq. 10 on the falling estimate, limited to 8 mm/s less per 8 ms cycle (1 m/s²)
+    v = [o["twist_B"][0] for o in outs]
+    assert v[0] == pytest.approx(0.0125 * (5.0 - 60.0 * DT - 0.95), rel=1e-9)
+    assert min(np.diff(v)) >= -1.0 * DT - 1e-12
+    assert outs[0]["brake_accel"][0] == 0.0
+    assert not Status(int(outs[0]["status"][0])) & Status.RELEASED
+
+
+@pytest.mark.parametrize(
+    ("fall", "raw", "why"),
+    [
+        (5.0, 0.0, "a slow fall is steering, not letting go"),
+        (60.0, 3.0, "the raw packet is still outside the deadband"),
+    ],
+)
+def test_no_release_without_both_signs(fall, raw, why):
+    ctl = released_controller()
+    outs = push_then_fall(ctl, fall_N_per_s=fall, raw_after=raw, ticks_after=3)
+    assert all(not Status(int(o["status"][0])) & Status.RELEASED for o in outs), why
+
+
+def test_the_undershoot_after_a_release_does_not_move_the_robot():
+    det = ReleaseDetector(ReleaseParams(enabled=True))
+    t = 0.0
+    for _ in range(50):
+        det.step(t, np.array([5.0, 0, 0]), np.array([5.0, 0, 0]), ETA, True)
+        t += DT
+    assert det.step(t, np.array([4.0, 0, 0]), np.zeros(3), ETA, True)
+    # the filter undershoots to -1.5 N (beyond the deadband) and comes back, raw noise around 0
+    for F in np.r_[np.linspace(3.0, -1.5, 10), np.linspace(-1.5, 0.0, 20)]:
+        t += DT
+        assert det.step(t, np.array([F, 0, 0]), np.array([0.3, 0, 0]), ETA, False)
+
+
+def test_a_new_push_ends_the_hold():
+    det = ReleaseDetector(ReleaseParams(enabled=True, hold_s=0.1))
+    t = 0.0
+    for _ in range(50):
+        det.step(t, np.array([5.0, 0, 0]), np.array([5.0, 0, 0]), ETA, True)
+        t += DT
+    assert det.step(t, np.array([4.0, 0, 0]), np.zeros(3), ETA, True)
+    t += 0.2
+    det.step(t, np.zeros(3), np.zeros(3), ETA, False)
+    t += DT
+    # a growing push outside the deadband, confirmed by the raw packet, after the hold
+    assert not det.step(t, np.array([1.5, 0, 0]), np.array([1.6, 0, 0]), ETA, True)
+    assert det.phase == ReleasePhase.GUIDING
+
+
+def test_a_release_in_contact_is_told_apart():
+    det = ReleaseDetector(ReleaseParams(enabled=True))
+    t = 0.0
+    for _ in range(50):
+        det.step(t, np.array([5.0, 0, 0]), np.array([5.0, 0, 0]), ETA, True, np.array([0, 0, 8.0]))
+        t += DT
+    assert det.step(t, np.array([4.0, 0, 0]), np.zeros(3), ETA, True, np.array([0, 0, 8.0]))
+    assert det.phase == ReleasePhase.RELEASED_CONTACT
+    assert det.releases == 1
+
+
+def test_braking_never_speeds_the_robot_up():
+    """The braking deceleration only sheds speed: a command away from rest is clamped as ever."""
+    from hoh_cosim.control.supervisor import limit_command
+
+    lim = LimitParams()
+    box = (lim.workspace_min_B.tolist(), lim.workspace_max_B.tolist())
+    zero = np.zeros(3)
+    v, _, status = limit_command(
+        np.array([0.05, 0, 0]), zero, zero, zero, DT, None, zero, lim, box, braking=True
+    )
+    assert v[0] == pytest.approx(lim.max_linear_accel * DT)
+    assert not status & int(Status.BRAKING)
+    v, _, status = limit_command(
+        zero, zero, np.array([0.05, 0, 0]), zero, DT, None, zero, lim, box, braking=True
+    )
+    np.testing.assert_array_equal(v, 0.0)
+    assert status & int(Status.BRAKING)
+
+
+def test_release_parameters_are_checked():
+    with pytest.raises(ConfigError, match=r"reengage_factor must be >= 1.0, got 0.5"):
+        ReleaseParams(reengage_factor=0.5)
+    with pytest.raises(ConfigError, match=r"min_fall_per_s"):
+        ReleaseParams(min_fall_per_s=0.0)
