@@ -278,6 +278,9 @@ def study_variants(
                     *mode.overrides,
                     *_operator_overrides(mode, i, seed),
                     *(set_option(f"operator.{k}", v) for k, v in task.operator),
+                    # the patient starts breathing as the hand takes the probe: the same breaths
+                    # meet the task at the same moments in every mode
+                    set_option("breathing.start_s", starts[name]),
                 )
                 duration = starts[name] + task.duration(quick)
                 path = scenarios / mode.scenario
