@@ -20,8 +20,8 @@ Figures (ours, from the literature's ranges):
   1985; Tsuji et al. 1995);
 - at most 25 N: above the forces of a scan (the seed's limit on contact force is 20–25 N).
 
-Three additions for the clinical study (`hoh_cosim.study.clinical`), each off by default so that
-every other scenario keeps its numbers:
+Additions for the clinical study (`hoh_cosim.study.clinical`), each off by default so that every
+other scenario keeps its numbers:
 - `intrinsic`: the hand's stiffness and damping act on the tip as it is, not as perceived a
   reaction delay ago: they are the muscles' own viscoelasticity (and the fastest reflexes), which
   needs no reaction (Hogan 1985, "Impedance control: an approach to manipulation"; the stiffness
@@ -40,7 +40,7 @@ every other scenario keeps its numbers:
   Neurophysiology vol. 1, ch. 22), the sum of eight sinusoids per axis at seeded frequencies and
   phases (a function of time: any step gives the same force). It is added while the hand follows
   a task;
-- the grip (with `intrinsic`): the hand holds the probe's orientation at the task's start with a
+- the grip: the hand holds the probe's orientation at the task's start with a
   rotational stiffness and damping, a torque -K_r θ - D_r ω on the handle (θ from the `R_BT`
   input). On the robot the contact's torque about the wrist sensor turns the probe through the
   rotational admittance unless something resists it: a real hand does. Freehand, the grip is part
@@ -145,7 +145,7 @@ class OperatorParams:
     tremor_rms_N: float = 0.0
     tremor_hz: float = 10.0
     tremor_bandwidth_hz: float = 2.0
-    grip_stiffness: float = 0.0  # K_r [N·m/rad] the grip's torque on the handle (intrinsic only)
+    grip_stiffness: float = 0.0  # K_r [N·m/rad] the grip's torque on the handle
     grip_damping: float = 0.0  # D_r [N·m·s/rad]
 
     UNITS: ClassVar[dict[str, Any]] = {
@@ -393,9 +393,9 @@ class Operator:
         offset, v_ref = self._reference_xyz(tau)
         (o0, o1, o2), (x0, x1, x2) = self._origin_xyz, offset
         p_ref = (o0 + x0, o1 + x1, o2 + x2)
+        grip = self._grip(inputs) if self._gripping else None
         if p.intrinsic:
             F = self._intrinsic(p_ref, v_ref, p_now, inputs["twist_B"], F_contact_seen, dt)
-            grip = self._grip(inputs) if self._gripping else None
             return self._out(self._hand(F, t_end), np.array(p_ref), on=True, tau=grip)
         F = _impedance(p.stiffness, p.damping, p_ref, p_seen, v_ref, v_seen)
         if p.task in CONTACT_TASKS:
@@ -407,7 +407,7 @@ class Operator:
             c0, c1, c2 = F_contact_seen
             a = self._press(self._dot_d((-c0, -c1, -c2)), dt)
             F = (F[0] + a * d0, F[1] + a * d1, F[2] + a * d2)
-        return self._out(self._saturate(F), np.array(p_ref), on=True)
+        return self._out(self._hand(F, t_end), np.array(p_ref), on=True, tau=grip)
 
     def _intrinsic(
         self,

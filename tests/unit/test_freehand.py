@@ -125,7 +125,7 @@ def test_the_grip_tilts_the_probe_by_the_torque_over_its_stiffness() -> None:
     final = {}
     for push in (0.0, 1.0):
         probe = FreehandProbe(FreehandParams(phantom=AIR, grip_stiffness=k_grip, grip_damping=0.05))
-        for k in range(4000):
+        for k in range(1500):
             out = probe.step(
                 k * 2e-3,
                 2e-3,
@@ -152,7 +152,7 @@ def test_breathing_lifts_the_probe_the_hand_presses() -> None:
     probe = FreehandProbe(FreehandParams(phantom=PhantomParams(plane_point_B=[0.0, 0.0, 0.245])))
     push = np.array([0.0, 0.0, -5.0])
     z = []
-    for k in range(6000):
+    for k in range(4000):
         t = k * 2e-3
         h = 0.005 * (1.0 - math.cos(2.0 * math.pi * 0.25 * t))
         h_dot = 0.005 * 2.0 * math.pi * 0.25 * math.sin(2.0 * math.pi * 0.25 * t)
@@ -169,7 +169,7 @@ def test_breathing_lifts_the_probe_the_hand_presses() -> None:
             },
         )
         z.append(out["p_BT_B"][2])
-    assert np.ptp(z[3000:]) == pytest.approx(0.010, rel=0.02)  # it rides 10 mm up and down
+    assert np.ptp(z[2000:]) == pytest.approx(0.010, rel=0.02)  # it rides 10 mm up and down
     assert out["F_contact_B"][2] == pytest.approx(5.0 + MASS * 9.81, rel=0.02)
 
 
