@@ -20,6 +20,35 @@ Figures (ours, from the literature's ranges):
   1985; Tsuji et al. 1995);
 - at most 25 N: above the forces of a scan (the seed's limit on contact force is 20–25 N).
 
+Additions for the clinical study (`hoh_cosim.study.clinical`), each off by default so that every
+other scenario keeps its numbers:
+- `intrinsic`: the hand's stiffness and damping act on the tip as it is, not as perceived a
+  reaction delay ago: they are the muscles' own viscoelasticity (and the fastest reflexes), which
+  needs no reaction (Hogan 1985, "Impedance control: an approach to manipulation"; the stiffness
+  that Mussa-Ivaldi, Hogan and Bizzi 1985 and Tsuji et al. 1995 measured is of that kind). The
+  reaction delay then delays what is voluntary: the press loop on the felt contact force. Along the
+  pressing direction the stiffness gives way to the press and the damping stays. A hand holding a
+  probe with nothing else (`plant_models.freehand`) needs this: a delayed stiffness on a free
+  0.48 kg probe oscillates;
+- `feedforward_B`: a constant force the hand adds, what a person does with a weight it knows: a
+  sonographer holding the probe alone carries its weight without waiting to feel it sag (Flanagan
+  and Wing 1997, J. Neurosci. 17(4):1519-1528: grip and load forces anticipate a known load); on
+  the robot nothing, the arm carries the tool;
+- physiological tremor: a force of `tremor_rms_N` (RMS of its magnitude) in a band
+  `tremor_bandwidth_hz` wide around `tremor_hz`, the 8–12 Hz component of physiological tremor
+  (Elble 2003, "Physiologic and enhanced physiologic tremor", Handbook of Clinical
+  Neurophysiology vol. 1, ch. 22), the sum of eight sinusoids per axis at seeded frequencies and
+  phases (a function of time: any step gives the same force). It is added while the hand follows
+  a task;
+- the grip: the hand holds the probe's orientation at the task's start with a
+  rotational stiffness and damping, a torque -K_r θ - D_r ω on the handle (θ from the `R_BT`
+  input). On the robot the contact's torque about the wrist sensor turns the probe through the
+  rotational admittance unless something resists it: a real hand does. Freehand, the grip is part
+  of `plant_models.freehand` (the stiff joint its integrator treats implicitly), and this one off.
+
+The `view` task: press to the target force while moving the tip `length_m` along `direction_B` on
+a minimum-jerk path over `reach_s`, then hold it there (reach a view and keep it).
+
 Tasks: `off` (no hand on the handle), `hold` (keep the tip where it was), `circle`, `line` (a line
 scan, back and forth), `press` (press to a target contact force and hold), `scan` (press and line scan
 together), `push_release` (push with a constant force, then let go), `probe_push` (the hand off the
@@ -53,8 +82,11 @@ __all__ = ["PLANES", "TASKS", "Operator", "OperatorParams"]
 
 _XYZ = tuple[float, float, float]
 
+_TREMOR_COMPONENTS = 8  # sinusoids per axis
+
 # constant outputs, returned again and again: read-only
 _ZERO = frozen([0.0, 0.0, 0.0])
+_IDENTITY = frozen(np.eye(3).reshape(9))
 _ON = frozen([1.0])
 _OFF = frozen([0.0])
 
@@ -90,6 +122,8 @@ class OperatorParams:
     force_ki: float = 0.2  # [1/s]
     approach_force_N: float = 1.0  # [N] pushed until contact is felt
     contact_threshold_N: float = 0.5  # [N] contact force that counts as touching
+    # view: the reach's duration (minimum jerk), then hold
+    reach_s: float = 5.0
     # push then release
     push_force_B: Vec3 = field(default_factory=lambda: frozen([5.0, 0.0, 0.0]))  # [N]
     release_s: float = 3.0  # [s]
@@ -105,6 +139,14 @@ class OperatorParams:
     reaction_delay_s: float = 0.15  # τ [s]
     max_force_N: float = 25.0
     released: bool = False  # True: the hand has let go of the handle (a scheduled release)
+    # the clinical study's hand (module docstring); the defaults leave today's hand unchanged
+    intrinsic: bool = False  # stiffness and damping on the tip as it is, not as perceived
+    feedforward_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 0.0]))  # [N]
+    tremor_rms_N: float = 0.0
+    tremor_hz: float = 10.0
+    tremor_bandwidth_hz: float = 2.0
+    grip_stiffness: float = 0.0  # K_r [N·m/rad] the grip's torque on the handle
+    grip_damping: float = 0.0  # D_r [N·m·s/rad]
 
     UNITS: ClassVar[dict[str, Any]] = {
         "start_s": "s",
@@ -121,6 +163,13 @@ class OperatorParams:
         "contact_threshold_N": "N",
         "push_force_B": "N",
         "release_s": "s",
+        "reach_s": "s",
+        "feedforward_B": "N",
+        "tremor_rms_N": "N",
+        "tremor_hz": "Hz",
+        "tremor_bandwidth_hz": "Hz",
+        "grip_stiffness": "N.m/rad",
+        "grip_damping": "N.m.s/rad",
         "probe_check_s": "s",
         "push_s": "s",
         "push_min_N": "N",
@@ -160,9 +209,21 @@ class OperatorParams:
             "contact_threshold_N",
             "probe_check_s",
             "push_min_N",
+            "tremor_rms_N",
+            "grip_stiffness",
+            "grip_damping",
         ):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
-        for name in ("radius_m", "period_s", "length_m", "stiffness", "max_force_N", "push_s"):
+        for name in (
+            "radius_m",
+            "period_s",
+            "length_m",
+            "stiffness",
+            "max_force_N",
+            "push_s",
+            "reach_s",
+            "tremor_hz",
+        ):
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
@@ -172,6 +233,14 @@ class OperatorParams:
             self, "press_direction_B", as_unit_vector(self.press_direction_B, "press_direction_B")
         )
         object.__setattr__(self, "push_force_B", as_vector(self.push_force_B, 3, "push_force_B"))
+        object.__setattr__(self, "feedforward_B", as_vector(self.feedforward_B, 3, "feedforward_B"))
+        object.__setattr__(
+            self,
+            "tremor_bandwidth_hz",
+            as_scalar(
+                self.tremor_bandwidth_hz, "tremor_bandwidth_hz", low=0.0, high=self.tremor_hz
+            ),
+        )
         object.__setattr__(
             self, "push_max_N", as_scalar(self.push_max_N, "push_max_N", low=self.push_min_N)
         )
@@ -189,7 +258,10 @@ class Operator:
         Port("p_BT_B", 3, "m", "probe tip position in the base frame"),
         Port("twist_B", 6, TWIST_UNITS, "probe tip twist in the base frame"),
         Port("F_contact_B", 3, "N", "force of the phantom on the probe tip, in B"),
+        Port("R_BT", 9, "1", "probe tip orientation in the base frame, row by row (the grip)"),
     )
+    OPTIONAL_INPUTS: ClassVar[frozenset[str]] = frozenset({"R_BT"})
+    """Inputs that may be left unconnected: R_BT then stays where the robot's home has it."""
     outputs: ClassVar[tuple[Port, ...]] = (
         Port("F_hand_B", 3, "N", "force of the hand on the handle, in B"),
         Port("tau_hand_B", 3, "N.m", "torque of the hand on the handle, in B"),
@@ -204,6 +276,7 @@ class Operator:
         self.params = params or OperatorParams()
         rng = rng if rng is not None else np.random.default_rng(0)
         self._push_seed = int(rng.integers(2**63))
+        self._tremor_seed = int(rng.integers(2**63))  # drawn after: the pushes stay as they were
         self.reset()
 
     def retune(self, params: OperatorParams) -> None:
@@ -219,6 +292,10 @@ class Operator:
         self._push_rng = np.random.default_rng(self._push_seed)
         self._pushes: list[tuple[float, Vec3]] = []  # (peak [N], unit direction), drawn in order
         self._derived_from: OperatorParams | None = None
+        tremor = np.random.default_rng(self._tremor_seed)
+        # per axis and component: the frequency's place in the band (-1/2 to 1/2), the phase
+        self._tremor_u = tremor.uniform(-0.5, 0.5, (3, _TREMOR_COMPONENTS))
+        self._tremor_phase = tremor.uniform(0.0, 2.0 * math.pi, (3, _TREMOR_COMPONENTS))
 
     def _derive(self) -> None:
         """What `step` uses of the parameters, vectors as Python floats (again when they change)."""
@@ -230,6 +307,8 @@ class Operator:
         self._line_xyz = p.direction_B.tolist()
         self._d_xyz = p.press_direction_B.tolist()
         self._d_is_axis = sum(x != 0.0 for x in self._d_xyz) == 1  # see `_dot_d`
+        self._ff_xyz = p.feedforward_B.tolist() if p.feedforward_B.any() else None
+        self._gripping = p.grip_stiffness > 0.0 or p.grip_damping > 0.0
         self._derived_from = p
 
     def _perceived(
@@ -263,6 +342,12 @@ class Operator:
                     r_dot * (s_ * a2 + c * b2),
                 ),
             )
+        if p.task == "view":  # minimum jerk to the view, then still
+            x = min(tau / p.reach_s, 1.0)
+            s = p.length_m * x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+            s_dot = p.length_m * 30.0 * x * x * (1.0 - x) * (1.0 - x) / p.reach_s
+            e0, e1, e2 = self._line_xyz
+            return (s * e0, s * e1, s * e2), (s_dot * e0, s_dot * e1, s_dot * e2)
         if p.task in ("line", "scan"):  # back and forth, starting and turning at rest
             omega = self._omega
             s = 0.5 * p.length_m * (1.0 - math.cos(omega * tau))
@@ -297,6 +382,7 @@ class Operator:
         if self._origin is None:
             self._origin = frozen(p_now)
             self._origin_xyz = self._origin.tolist()
+            self._R_origin = np.array(inputs.get("R_BT", _IDENTITY), dtype=float).reshape(3, 3)
         tau = t_end - p.start_s
 
         if p.task == "push_release":
@@ -307,6 +393,10 @@ class Operator:
         offset, v_ref = self._reference_xyz(tau)
         (o0, o1, o2), (x0, x1, x2) = self._origin_xyz, offset
         p_ref = (o0 + x0, o1 + x1, o2 + x2)
+        grip = self._grip(inputs) if self._gripping else None
+        if p.intrinsic:
+            F = self._intrinsic(p_ref, v_ref, p_now, inputs["twist_B"], F_contact_seen, dt)
+            return self._out(self._hand(F, t_end), np.array(p_ref), on=True, tau=grip)
         F = _impedance(p.stiffness, p.damping, p_ref, p_seen, v_ref, v_seen)
         if p.task in CONTACT_TASKS:
             d0, d1, d2 = self._d_xyz
@@ -317,7 +407,52 @@ class Operator:
             c0, c1, c2 = F_contact_seen
             a = self._press(self._dot_d((-c0, -c1, -c2)), dt)
             F = (F[0] + a * d0, F[1] + a * d1, F[2] + a * d2)
-        return self._out(self._saturate(F), np.array(p_ref), on=True)
+        return self._out(self._hand(F, t_end), np.array(p_ref), on=True, tau=grip)
+
+    def _intrinsic(
+        self,
+        p_ref: _XYZ,
+        v_ref: _XYZ,
+        p_now: Vec,
+        twist: Vec,
+        F_contact_seen: Sequence[float],
+        dt: float,
+    ) -> _XYZ:
+        """The hand with `intrinsic` (module docstring): K (p_ref - p) + D (v_ref - v) on the tip
+        as it is; on a contact task K acts across the pressing direction d only and the press
+        (on the contact force as perceived) along it."""
+        p = self.params
+        K, D = p.stiffness, p.damping
+        (r0, r1, r2), (u0, u1, u2) = p_ref, v_ref
+        x0, x1, x2 = p_now.tolist()
+        v0, v1, v2 = twist[:3].tolist()
+        k0, k1, k2 = K * (r0 - x0), K * (r1 - x1), K * (r2 - x2)
+        F = (k0 + D * (u0 - v0), k1 + D * (u1 - v1), k2 + D * (u2 - v2))
+        if p.task in CONTACT_TASKS:
+            d0, d1, d2 = self._d_xyz
+            c0, c1, c2 = F_contact_seen
+            # - (K e · d) d + press(-F_contact · d) d
+            a = self._press(self._dot_d((-c0, -c1, -c2)), dt) - self._dot_d((k0, k1, k2))
+            F = (F[0] + a * d0, F[1] + a * d1, F[2] + a * d2)
+        return F
+
+    def _hand(self, F: Sequence[float], t: float) -> Vec3:
+        """F with the feed-forward, saturated, with the tremor at time t (module docstring)."""
+        if self._ff_xyz is not None:
+            (f0, f1, f2), (a0, a1, a2) = F, self._ff_xyz
+            F = (f0 + a0, f1 + a1, f2 + a2)
+        out = self._saturate(F)
+        if self.params.tremor_rms_N > 0.0:
+            out = out + self.tremor(t)
+        return out
+
+    def tremor(self, t: float) -> Vec3:
+        """The tremor force at time t [N]: per axis the sum of the components, each of amplitude
+        a = rms / (√3 · √(n/2)), so that the force's magnitude has `tremor_rms_N` as its RMS."""
+        p = self.params
+        hz = p.tremor_hz + p.tremor_bandwidth_hz * self._tremor_u
+        a = p.tremor_rms_N / math.sqrt(3.0 * _TREMOR_COMPONENTS / 2.0)
+        return a * np.sin(2.0 * math.pi * hz * t + self._tremor_phase).sum(axis=1)
 
     def _dot_d(self, v: Sequence[float]) -> float:
         """v · d (d the pressing direction), the value numpy's `v @ d` gives. With d along an axis
@@ -376,12 +511,29 @@ class Operator:
         n = math.sqrt(float(F_arr @ F_arr))
         return F_arr * (limit / n) if n > limit else F_arr
 
+    def _grip(self, inputs: Mapping[str, Vec]) -> Vec3:
+        """The grip's torque, -K_r θ - D_r ω: θ the rotation vector from the orientation at the
+        task's start to the current one, ω the tip's angular velocity (module docstring)."""
+        p = self.params
+        R = np.asarray(inputs.get("R_BT", _IDENTITY), dtype=float).reshape(3, 3)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = (R @ self._R_origin.T).tolist()
+        # θ from the skew part: sin|θ| θ/|θ| = vee(Rrel - Rrelᵀ)/2 (the grip's angles are small)
+        x, y, z = 0.5 * (r21 - r12), 0.5 * (r02 - r20), 0.5 * (r10 - r01)
+        s = math.sqrt(x * x + y * y + z * z)
+        scale = math.atan2(s, 0.5 * (r00 + r11 + r22 - 1.0)) / s if s > 1e-12 else 1.0
+        w0, w1, w2 = inputs["twist_B"][3:].tolist()
+        K, D = p.grip_stiffness, p.grip_damping
+        return np.array((-K * scale * x - D * w0, -K * scale * y - D * w1, -K * scale * z - D * w2))
+
     @staticmethod
-    def _out(F: Vec3, p_ref: Vec3, on: bool, tip: Vec3 | None = None) -> dict[str, Vec]:
-        """The outputs; `F`, `p_ref` and `tip` are arrays no one changes (fresh or read-only)."""
+    def _out(
+        F: Vec3, p_ref: Vec3, on: bool, tip: Vec3 | None = None, tau: Vec3 | None = None
+    ) -> dict[str, Vec]:
+        """The outputs; `F`, `p_ref`, `tip` and `tau` are arrays no one changes (fresh or
+        read-only)."""
         return {
             "F_hand_B": F,
-            "tau_hand_B": _ZERO,
+            "tau_hand_B": _ZERO if tau is None else tau,
             "p_ref_B": p_ref,
             "hand_on": _ON if on else _OFF,
             "F_tip_B": _ZERO if tip is None else tip,

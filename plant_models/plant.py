@@ -1,7 +1,9 @@
 """The plant block: the UR5 under speedL, the probe and its housing, and the phantom.
 
 Inputs: the speedL twist command, the operator's wrench on the handle and a push directly on the
-probe tip (how the seed collected its probe-sensor data, Fig. 6 and 14). Outputs: what the robot
+probe tip (how the seed collected its probe-sensor data, Fig. 6 and 14), and the phantom surface's
+displacement along its normal and its rate (breathing, `plant_models.breathing`; optional: a caller
+that does not give them, as every scenario without breathing, has a still surface). Outputs: what the robot
 reports (TCP pose and twist, joint positions), the wrist sensor's pose, and the ideal readings of both
 force sensors plus the contact force itself (the sensor blocks add their imperfections).
 
@@ -21,7 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from hoh_cosim.control.block import TWIST_UNITS, WRENCH_UNITS, Port
-from hoh_cosim.control.vectors import GRAVITY_B, Vec, Vec3, as_vector
+from hoh_cosim.control.vectors import GRAVITY_B, Vec, Vec3, as_vector, frozen
 from plant_models.arm import ArmParams, SpeedLArm
 from plant_models.kernels import KernelUR5, kernels_enabled, loads_constants, tool_loads
 from plant_models.tissue import PhantomParams, contact_force
@@ -32,6 +34,7 @@ __all__ = ["Plant", "PlantParams"]
 
 # entries of a raveled 4x4 [[R_BX, p_BX_B], [0, 1]]: p_BX_B, then R_BX row by row
 _POSE_ENTRIES = np.array([3, 7, 11, 0, 1, 2, 4, 5, 6, 8, 9, 10])
+_STILL = frozen([0.0])  # the surface's offset and rate when no breathing is connected
 
 
 @dataclass(frozen=True)
@@ -65,7 +68,16 @@ class Plant:
         Port(
             "F_tip_B", 3, "N", "force of a hand directly on the probe tip (below its sensor), in B"
         ),
+        Port(
+            "surface_offset_m",
+            1,
+            "m",
+            "displacement of the phantom's surface along its outward normal (breathing), 0 at rest",
+        ),
+        Port("surface_rate_m_s", 1, "m/s", "rate of the surface's displacement"),
     )
+    OPTIONAL_INPUTS: ClassVar[frozenset[str]] = frozenset({"surface_offset_m", "surface_rate_m_s"})
+    """Inputs that may be left unconnected: 0 then (a phantom that does not breathe)."""
     outputs: ClassVar[tuple[Port, ...]] = (
         Port("p_BT_B", 3, "m", "TCP (probe tip) position in the base frame"),
         Port("R_BT", 9, "1", "TCP orientation in the base frame, row by row"),
@@ -101,7 +113,7 @@ class Plant:
         self.arm.reset()
         self._cycle = -1
         self._params_changed()
-        self._evaluate(np.zeros(3), np.zeros(3), np.zeros(3))
+        self._evaluate(np.zeros(3), np.zeros(3), np.zeros(3), _STILL, _STILL)
 
     def _params_changed(self) -> None:
         """Take what the evaluation needs from the parameters, and forget the last evaluation."""
@@ -138,7 +150,13 @@ class Plant:
                 break
             arm.advance(boundary - t)
             left, t = t + left - boundary, boundary
-        return self._evaluate(inputs["F_hand_B"], inputs["tau_hand_B"], inputs["F_tip_B"])
+        return self._evaluate(
+            inputs["F_hand_B"],
+            inputs["tau_hand_B"],
+            inputs["F_tip_B"],
+            inputs.get("surface_offset_m", _STILL),
+            inputs.get("surface_rate_m_s", _STILL),
+        )
 
     @property
     def outputs_now(self) -> dict[str, Vec]:
@@ -184,7 +202,9 @@ class Plant:
         self._kinematics_at = (state, kinematics)
         return kinematics
 
-    def _evaluate(self, F_hand_B: Vec3, tau_hand_B: Vec3, F_tip_B: Vec3) -> dict[str, Vec]:
+    def _evaluate(
+        self, F_hand_B: Vec3, tau_hand_B: Vec3, F_tip_B: Vec3, offset: Vec, offset_rate: Vec
+    ) -> dict[str, Vec]:
         """The outputs at the arm's state under these loads, kept in `_outputs`; the same state and
         loads as the last evaluation give the same arrays again, in a new dict."""
         key = (
@@ -192,12 +212,16 @@ class Plant:
             F_hand_B.tobytes(),
             tau_hand_B.tobytes(),
             F_tip_B.tobytes(),
+            offset.tobytes(),
+            offset_rate.tobytes(),
         )
         if key == self._evaluated_at:
             return dict(self._outputs)
         kinematics = self._kinematics(key[0])
         p_BT, R_BT, twist, p_BS, R_BS_rows, R_BS, a_C, omega, p_BK, a_P = kinematics
-        contact = contact_force(self.params.phantom, p_BT, twist[:3])
+        contact = contact_force(
+            self.params.phantom, p_BT, twist[:3], float(offset[0]), float(offset_rate[0])
+        )
         # a push on the tip loads both sensors as a contact does
         if self._kernel is not None:  # ToolLoads.readings, compiled
             loads = tool_loads(

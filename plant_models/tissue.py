@@ -14,6 +14,9 @@ of 2 cm radius on E = 30 kPa (ν ≈ 0.49, E* ≈ 40 kPa) gives k = 4/3 E* √R 
 7.5 N at 1 cm and 21 N at 2 cm of indentation, the forces of an abdominal scan. c = 0.5 s/m is a
 moderately lossy gel. μ = 0.2 for a probe sliding on gel, b = 2 N·s/m.
 
+Breathing moves the surface along its outward normal (`contact_force`'s offset; see
+`plant_models.breathing`).
+
 Shapes: a plane (default) or an ellipsoid, a curved abdomen. For the ellipsoid the depth is the
 first-order distance -f/|∇f| of its implicit function f = Σ((x - c)ᵢ/aᵢ)² - 1, exact on the surface and
 within a few per cent for the centimetres a probe presses in.
@@ -115,13 +118,25 @@ def surface_depth(params: PhantomParams, p_B: Vec3) -> tuple[float, Vec3]:
     return -math.inf, np.array([0.0, 0.0, 1.0])
 
 
-def contact_force(params: PhantomParams, p_B: Vec3, v_B: Vec3) -> Contact:
-    """Force of the phantom on a probe tip at p moving with velocity v."""
+def contact_force(
+    params: PhantomParams,
+    p_B: Vec3,
+    v_B: Vec3,
+    offset_m: float = 0.0,
+    offset_rate_m_s: float = 0.0,
+) -> Contact:
+    """Force of the phantom on a probe tip at p moving with velocity v.
+
+    `offset_m` moves the surface along its outward normal (breathing: > 0 raises it), at
+    `offset_rate_m_s`: the depth grows by the offset, δ = δ₀ + h, and its rate by the surface's
+    speed, δ̇ = -v·n + ḣ. The surface moves along its normal only, so sliding is unchanged.
+    """
     depth, n = surface_depth(params, p_B)
+    depth += offset_m
     if depth <= 0.0:
         return Contact(_NO_FORCE, depth, n)
     v_n = float(v_B.dot(n))
-    depth_rate = -v_n
+    depth_rate = -v_n + offset_rate_m_s
     spring = params.stiffness * depth**params.exponent
     F_n = max(0.0, spring * (1.0 + 1.5 * params.damping * depth_rate))
     # F = F_n n - (μ F_n tanh(|v_t|/v_s)/|v_t| + b) v_t  with  v_t = v - (v·n) n

@@ -6,6 +6,7 @@
     hoh-cosim hw run|calibrate|sensors|rehearse ...    (see hoh_cosim.commands.hardware)
     hoh-cosim replay LOG.mcap [--set ...] [--out DIR]
     hoh-cosim sweep|report|tune|probe-correction ...   (see hoh_cosim.commands.study)
+    hoh-cosim study clinical ...                       (see hoh_cosim.commands.study)
 
 Exit status: 0 done; 2 the input is wrong (one line naming the file and the place); 1 the run failed.
 """
@@ -34,6 +35,7 @@ SUBCOMMANDS = (
     "report",
     "tune",
     "probe-correction",
+    "study",
 )
 
 

@@ -16,6 +16,8 @@ from hoh_cosim.control.impedance import (
     PositionImpedanceParams,
 )
 from hoh_cosim.control.sequencer import PoseSequencer, SequencerParams
+from plant_models.breathing import Breathing, BreathingParams
+from plant_models.freehand import FreehandParams, FreehandProbe
 from plant_models.operator import Operator, OperatorParams
 from plant_models.panda import PandaParams, PandaPlant
 from plant_models.plant import Plant, PlantParams
@@ -115,6 +117,20 @@ KINDS: dict[str, ComponentKind] = {
             "hoh_ur5_impedance",
             "position-based impedance for the speedL-commanded UR5",
             starts_from="plant",
+        ),
+        ComponentKind(
+            "breathing",
+            Breathing,
+            BreathingParams,
+            "hoh_breathing",
+            "the patient's breathing: the phantom's surface along its normal",
+        ),
+        ComponentKind(
+            "freehand",
+            FreehandProbe,
+            FreehandParams,
+            "hoh_freehand",
+            "the probe held by the hand alone, on the phantom (no robot)",
         ),
     )
 }

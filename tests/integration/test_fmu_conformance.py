@@ -35,6 +35,7 @@ DRIVE = {
     "panda": {"tau_cmd[1]": 1.0},
     "ft150": {"wrench_S_true[1]": 3.0},
     "fse103": {"force_P_true[3]": 2.0},
+    "freehand": {"F_hand_B[1]": 0.3, "hand_on": 1.0},
 }
 
 

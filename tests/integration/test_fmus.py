@@ -114,7 +114,7 @@ def test_model_description_matches_block(fmus: dict[str, Path], kind: str) -> No
             assert str(variable.start).lower() == str(leaf.value).lower(), name
 
 
-@pytest.mark.parametrize("kind", ["ft150", "fse103", "operator"])
+@pytest.mark.parametrize("kind", ["ft150", "fse103", "operator", "breathing"])
 def test_random_block_has_integer_seed(fmus: dict[str, Path], kind: str) -> None:
     assert KINDS[kind].random
     md = read_model_description(str(fmus[kind]))
@@ -123,7 +123,7 @@ def test_random_block_has_integer_seed(fmus: dict[str, Path], kind: str) -> None
 
 
 def test_deterministic_blocks_have_no_seed(fmus: dict[str, Path]) -> None:
-    for kind in ("plant", "estimator", "controller", "sequencer"):
+    for kind in ("plant", "estimator", "controller", "sequencer", "freehand"):
         md = read_model_description(str(fmus[kind]))
         assert "seed" not in {v.name for v in md.modelVariables}, kind
 
@@ -177,6 +177,12 @@ START_VALUES: dict[str, dict[str, Any]] = {
         **_port("R_BT", IDENTITY),
         **_port("F_ext_B", [0.0, 0.0, 2.0]),
         **_port("ready", [1.0]),
+    },
+    "breathing": {"seed": 3, "rate_per_min": 20.0},
+    "freehand": {
+        **_port("F_hand_B", [0.5, -0.2, 4.0]),
+        **_port("hand_on", [1.0]),
+        **_port("surface_offset_m", [0.002]),
     },
 }
 

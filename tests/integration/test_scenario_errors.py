@@ -477,7 +477,7 @@ BAD_SCENARIOS = [
         "metrics",
         [
             "expected one of none, circles, static_noise, gravity_calibration, contact_scan, "
-            "release, teleecho, probe_data, got 'bogus'"
+            "release, teleecho, probe_data, clinical, got 'bogus'"
         ],
         id="metrics-unknown-set",
     ),

@@ -55,6 +55,8 @@ SHORT = {
     "release": ["--duration", "7"],
     "teleecho_slide": ["--duration", "8"],
     "teleecho_slide_ur5": ["--duration", "8"],
+    "clinical_assisted": ["--duration", "15"],
+    "clinical_freehand": ["--duration", "12"],
 }
 
 METRICS = {
@@ -101,6 +103,18 @@ METRICS = {
         "contact_force_std_N": float,
         "orientation_error_max_rad": float,
         "contact_losses": int,
+    },
+    "clinical": {
+        "hand_force_rms_N": float,
+        "hand_force_peak_N": float,
+        "hand_impulse_N_s": float,
+        "contact_losses": int,
+        "contact_force_mean_N": float,
+        "contact_force_std_N": float,
+        "jitter_image_mm": float,
+        "jitter_rotation_deg": float,
+        "task_time_s": float,
+        "path_rms_error_m": float,
     },
 }
 

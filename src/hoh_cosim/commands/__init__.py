@@ -5,7 +5,7 @@ Each family module has `add_commands(sub)` (its subcommands on the main parser) 
 
     cosim      the scenario run, build-fmus, export, identify-gravity
     hardware   hw run | calibrate | sensors | rehearse, replay
-    study      sweep, report, tune, probe-correction
+    study      sweep, report, tune, probe-correction, study clinical
 """
 
 from __future__ import annotations

@@ -4,6 +4,8 @@
     hoh-cosim report [--out DIR] [--quick] [--workers N] [--scheduler ADDRESS] [--scenarios DIR]
     hoh-cosim tune [--out DIR] [-n N] [--seed S] [--seeds 1,2,3] [--workers N] [--scheduler ADDRESS]
     hoh-cosim probe-correction [--out DIR] [--seed S] [--engine E] [--workers N] [--quick]
+    hoh-cosim study clinical [--quick] [--operators N] [--seed S] [--workers W] [--scheduler ADDR]
+                             [--out DIR]
 
 `--workers 0` runs everything serially in this process (no Dask).
 """
@@ -20,7 +22,8 @@ from hoh_cosim.errors import ConfigError
 
 __all__ = ["COMMANDS", "add_commands", "run_command"]
 
-COMMANDS = ("sweep", "report", "tune", "probe-correction")
+COMMANDS = ("sweep", "report", "tune", "probe-correction", "study")
+STUDIES = ("clinical",)
 EXIT_OK, EXIT_FAILED = 0, 1
 
 
@@ -149,6 +152,46 @@ def add_commands(sub) -> None:
         help="where circles.yaml and the other scenarios are (default: ./scenarios)",
     )
     _cluster_options(probe)
+
+    study = sub.add_parser(
+        "study",
+        help="studies over a population: clinical (freehand against assisted scanning)",
+        description="Studies over a population of simulated sonographers.",
+    )
+    study_sub = study.add_subparsers(
+        dest="study", metavar="STUDY", parser_class=type(study), required=True
+    )
+    clinical = study_sub.add_parser(
+        "clinical",
+        help="freehand against assisted scanning on a breathing patient, N operators",
+        description=(
+            "N simulated sonographers (hand, tremor, strength, grip; a breathing patient each) "
+            "reach a view and hold it, scan a 10 cm line at 8 N and press to 15 N, freehand and "
+            "assisted under each law; paired comparisons per operator with 95 %% confidence "
+            "intervals; write index.html, report.md, runs.csv, operators.csv and summary.json."
+        ),
+    )
+    clinical.add_argument(
+        "--quick",
+        action="store_true",
+        help="3 operators (unless --operators) and shorter holds: under 3 minutes on 2 cores",
+    )
+    clinical.add_argument(
+        "--operators", type=int, metavar="N", help="simulated sonographers (default 20; 3 quick)"
+    )
+    clinical.add_argument(
+        "--seed", type=int, default=1, help="of the population and its patients (default 1)"
+    )
+    clinical.add_argument(
+        "--out", metavar="DIR", default="clinical", help="the study's directory (default: clinical)"
+    )
+    clinical.add_argument(
+        "--scenarios",
+        metavar="DIR",
+        default="scenarios",
+        help="where clinical_freehand.yaml and clinical_assisted.yaml are (default: ./scenarios)",
+    )
+    _cluster_options(clinical)
 
 
 def _check_workers(args: argparse.Namespace) -> None:
@@ -332,6 +375,40 @@ def _num(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3g}"
 
 
+def _clinical(args: argparse.Namespace) -> int:
+    from hoh_cosim.study.clinical import ASSISTED, MODES, TASKS, run_clinical
+
+    result = run_clinical(
+        args.out,
+        quick=args.quick,
+        operators=args.operators,
+        seed=args.seed,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        scenarios=args.scenarios,
+        progress=not args.quiet,
+    )
+    s = result.summary
+    print(
+        f"clinical: {s['operators']} operators, {s['runs']} runs in {s['wall_s']:.0f} s, "
+        f"{len(s['failed_runs'])} failed"
+    )
+    print(f"  {'task':6} {'mode':28} {'hand force less [%]':>28} {'jitter less [%]':>24}")
+    for task in TASKS:
+        for mode in ASSISTED:
+            e = s["tasks"][task][mode]
+            force, jitter = e["hand_force_reduction_pct"], e["jitter_improvement_pct"]
+            print(
+                f"  {task:6} {MODES[mode].label:28} "
+                f"{_num(force['mean']):>8} (smallest {_num(force['min']):>6})"
+                f"{_num(jitter['mean']):>14} (smallest {_num(jitter['min'])})"
+            )
+    for line in s["failed_runs"][:5]:
+        print(f"hoh-cosim: failed: {line}", file=sys.stderr)
+    print(f"wrote {result.out / 'index.html'}")
+    return EXIT_FAILED if s["failed_runs"] else EXIT_OK
+
+
 def run_command(args: argparse.Namespace) -> int | None:
     if args.command == "probe-correction":
         return _probe_correction(args)
@@ -341,4 +418,6 @@ def run_command(args: argparse.Namespace) -> int | None:
         return _report(args)
     if args.command == "tune":
         return _tune(args)
+    if args.command == "study" and args.study == "clinical":
+        return _clinical(args)
     return None

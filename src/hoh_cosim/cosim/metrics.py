@@ -9,7 +9,7 @@ import numpy.typing as npt
 
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["lag_at_frequency", "max_abs", "sinusoid_phase"]
+__all__ = ["high_passed", "lag_at_frequency", "max_abs", "sinusoid_phase"]
 
 
 def sinusoid_phase(t: npt.ArrayLike, y: npt.ArrayLike, frequency_hz: float) -> tuple[float, float]:
@@ -43,3 +43,11 @@ def lag_at_frequency(
 def max_abs(x: npt.ArrayLike, axis: int = 0) -> np.ndarray:
     """Largest |x| along `axis`: the seed's "maximum absolute noise" (section 4.C)."""
     return np.max(np.abs(np.asarray(x, dtype=np.float64)), axis=axis)
+
+
+def high_passed(x: np.ndarray, cutoff_hz: float, dt: float) -> np.ndarray:
+    """`x` (n, k) through a 4th-order Butterworth high-pass, forwards and backwards (no phase)."""
+    from scipy import signal
+
+    sos = signal.butter(4, cutoff_hz, "highpass", fs=1.0 / dt, output="sos")
+    return signal.sosfiltfilt(sos, x, axis=0)

@@ -810,6 +810,70 @@ def _probe_data(scenario: Scenario, rec: Recording, report: Report) -> dict[str,
     return {"probe_forces.png": fig}
 
 
+def _clinical(scenario: Scenario, rec: Recording, report: Report) -> dict[str, Figure]:
+    """One clinical task run: the contact force with the breathing beside it, the hand's force,
+    and the tip's jitter in the probe's frame."""
+    from hoh_cosim.cosim.clinical import ARM_KINDS, JITTER_HZ, measurement_window
+    from hoh_cosim.cosim.metrics import high_passed
+
+    op = scenario.component_of_kind("operator")
+    arm = scenario.component_of_kinds(ARM_KINDS)
+    breathing = scenario.component_of_kind("breathing")
+    contact, hand, tip = (
+        _get(rec, arm, "F_contact_B"),
+        _get(rec, op, "F_hand_B"),
+        _get(rec, arm, "p_BT_B"),
+    )
+    R = _get(rec, arm, "R_BT")
+    if contact is None or hand is None or tip is None or R is None:
+        return {}
+    m = report.metrics
+    u = op.params.press_direction_B
+    window, _ = measurement_window(scenario, rec)
+    mode = "freehand" if arm.kind.name == "freehand" else "on the robot"
+    fig, axes = _panels(
+        3,
+        title=(
+            f"{op.params.task} task {mode}: forces along the press direction u = {_vector(u)}, "
+            f"hand force, tip jitter\n{_window(rec)}; statistics after the dotted line\n"
+            f"hand_force_rms_N = {_fmt(m.get('hand_force_rms_N'), 1, 'N')}, "
+            f"contact_force_std_N = {_fmt(m.get('contact_force_std_N'), 1, 'N')}, "
+            f"contact_losses = {m.get('contact_losses')}, "
+            f"jitter_image_mm = {_fmt(m.get('jitter_image_mm'), 1e3, 'µm')}"
+        ),
+        panel=(6.4, 1.7),
+    )
+    t = rec.time
+    ax = axes[0, 0]
+    _line(ax, t, -contact @ u, color="tab:blue", lw=1.1, label="phantom on the probe")
+    ax.axhline(op.params.target_force_N, color="k", ls="--", lw=0.8, label="target")
+    _label(ax, "contact force\nalong u [N]")
+    offset = _get(rec, breathing, "offset_m")
+    if offset is not None:
+        twin = ax.twinx()
+        _line(twin, t, 1e3 * offset[:, 0], color="0.6", lw=0.9)
+        twin.set_ylabel("breathing [mm]", fontsize=_LABEL_PT, color="0.45")
+        twin.tick_params(labelsize=_TICK_PT)
+        ax.plot([], [], color="0.6", lw=0.9, label="breathing (right)")
+    _line(axes[1, 0], t, np.linalg.norm(hand, axis=1), color="tab:orange", lw=1.0, label="‖F_hand‖")
+    _label(axes[1, 0], "hand force [N]")
+    if window.sum() > 2 * round(1.0 / scenario.dt_s):
+        e = np.full(len(t), np.nan)
+        e_B = high_passed(tip[window], JITTER_HZ, scenario.dt_s)
+        e_T = np.einsum("nji,nj->ni", R[window].reshape(-1, 3, 3), e_B)
+        for j, (k, name) in enumerate(((0, "lateral"), (2, "axial"), (1, "elevation"))):
+            e[window] = 1e3 * e_T[:, k]
+            _line(axes[2, 0], t, e.copy(), color=COLOURS[j], lw=0.8, label=name)
+    _label(axes[2, 0], f"tip above {JITTER_HZ:g} Hz\nin the probe frame [mm]")
+    if window.any():
+        for ax in axes[:, 0]:
+            ax.axvline(t[np.argmax(window)], color="0.4", ls=":", lw=1.0)
+    for ax in axes[:, 0]:
+        _legend(ax)
+    _time_axis(axes, rec)
+    return {"clinical.png": fig}
+
+
 def _no_plots(scenario: Scenario, rec: Recording, report: Report) -> dict[str, Figure]:
     """The 'none' set: no plots."""
     return {}
@@ -825,6 +889,7 @@ _PLOTS: dict[str, Callable[[Scenario, Recording, Report], dict[str, Figure]]] = 
     "release": _release,
     "teleecho": _teleecho,
     "probe_data": _probe_data,
+    "clinical": _clinical,
 }
 
 

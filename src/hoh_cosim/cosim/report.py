@@ -46,6 +46,8 @@ parameters (the truth the simulation knows); none is a constant. A metric that t
   of the raw reading (`probe_raw_correlation`, `probe_raw_rms_N`) and of the estimator's correction
   (`probe_corrected_correlation`, `probe_corrected_rms_N`; for the online map its prediction before it
   learns from the sample), and `probe_corrected_rms_late_N` over the second half of the samples.
+- clinical (the clinical study, freehand or assisted, breathing or not): effort, force stability,
+  image stability, task time and path error of one task (`hoh_cosim.cosim.clinical` defines them).
 - with a controller: `controller_flags`, what its limits did once the estimator was ready ("ok" if
   nothing), and `controller_stop_s`, how long it commanded a stop then.
 - every run: `realtime_factor` (simulated / wall-clock seconds) and `wall_s`.
@@ -63,7 +65,7 @@ import numpy as np
 
 from hoh_cosim.control.gravity import identify_gravity
 from hoh_cosim.control.supervisor import STOP_FLAGS, Status
-from hoh_cosim.cosim.metrics import sinusoid_phase
+from hoh_cosim.cosim.metrics import high_passed, sinusoid_phase
 from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.scenario import (
     TELEECHO_ARMS,
@@ -122,14 +124,6 @@ def lag_in_window(
 
 HF_FACTOR = 4.0
 """The jitter band of a circle run starts at this many times the circle's frequency."""
-
-
-def high_passed(x: np.ndarray, cutoff_hz: float, dt: float) -> np.ndarray:
-    """`x` (n, k) through a 4th-order Butterworth high-pass, forwards and backwards (no phase)."""
-    from scipy import signal
-
-    sos = signal.butter(4, cutoff_hz, "highpass", fs=1.0 / dt, output="sos")
-    return signal.sosfiltfilt(sos, x, axis=0)
 
 
 def _circles(scenario: Scenario, rec: Recording, report: Report) -> None:
@@ -475,6 +469,15 @@ def _controller_status(scenario: Scenario, rec: Recording, report: Report) -> No
     )
 
 
+def _clinical(scenario: Scenario, rec: Recording, report: Report) -> None:
+    """The clinical study's set (`hoh_cosim.cosim.clinical`)."""
+    from hoh_cosim.cosim.clinical import clinical_metrics
+
+    metrics, notes = clinical_metrics(scenario, rec)
+    report.metrics.update(metrics)
+    report.notes.extend(notes)
+
+
 def _no_metrics(scenario: Scenario, rec: Recording, report: Report) -> None:
     """The 'none' set: only what every run reports."""
 
@@ -489,6 +492,7 @@ _SETS: dict[str, Callable[[Scenario, Recording, Report], None]] = {
     "release": _release,
     "teleecho": _teleecho,
     "probe_data": _probe_data,
+    "clinical": _clinical,
 }
 
 

@@ -17,8 +17,8 @@
     connections:
       - {from: operator.F_hand_B, to: plant.F_hand_B}       # whole ports
       - {from: plant.force_P[3], to: fse103.force_P_true[3]} # or single elements, from 1
-    inputs:                          # values for inputs nothing is connected to
-      plant.tau_hand_B: [0, 0, 0]
+    inputs:                          # values for inputs nothing is connected to (a block's
+      plant.tau_hand_B: [0, 0, 0]    # OPTIONAL_INPUTS may be left out: 0)
     events:
       - {at_s: 12.0, set: {operator.released: true}}       # tunable parameters only
     record: [plant.p_BT_B, operator.F_hand_B]               # signals.csv columns (default: all)
@@ -31,6 +31,7 @@ Every mistake is a `ConfigError` whose one-line message starts with the file and
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 import zlib
 from collections.abc import Mapping, Sequence
@@ -43,7 +44,7 @@ import numpy as np
 from hoh_cosim.control.block import Port
 from hoh_cosim.control.cycle import SensorSetup
 from hoh_cosim.errors import ConfigError
-from hoh_cosim.kinds import KINDS, ComponentKind
+from hoh_cosim.kinds import KINDS, ComponentKind, input_starts
 from hoh_cosim.params import from_mapping, leaves, override
 from hoh_cosim.yamlfile import Where, parse_value, read_yaml
 
@@ -72,6 +73,7 @@ METRIC_SETS: dict[str, tuple[str | tuple[str, ...], ...]] = {
     "release": ("operator", "plant"),
     "teleecho": (TELEECHO_ARMS, TELEECHO_CONTROLLERS),
     "probe_data": ("estimator", "fse103", "plant"),
+    "clinical": ("operator", ("plant", "freehand")),
 }
 """Each metric set (see `hoh_cosim.cosim.report`) and the kinds of component it reads (a tuple:
 any one of those kinds). The one list of metric sets: the report's and the plots' tables have one
@@ -334,6 +336,10 @@ def load_scenario(
                     )
                 continue
             missing = [i for i in range(port.size) if (comp.name, port.name, i) not in fed]
+            optional = getattr(comp.kind.block, "OPTIONAL_INPUTS", frozenset())
+            if len(missing) == port.size and port.name in optional:  # left out: at rest
+                defaults[(comp.name, port.name)] = _resting_input(comp.kind.name, port.name)
+                continue
             if missing:
                 element = port.name if port.size == 1 else f"{port.name}[{missing[0] + 1}]"
                 raise w.error(
@@ -361,6 +367,19 @@ def load_scenario(
         tuple(record),
         record_every,
     )
+
+
+@functools.cache
+def _resting_start(kind: str, port: str) -> tuple[float, ...] | None:
+    value = input_starts(kind).get(port)
+    return None if value is None else tuple(value.tolist())
+
+
+def _resting_input(kind: str, port: str) -> np.ndarray:
+    """An optional input nothing feeds: where a world at rest has it (`input_starts`), else 0."""
+    start = _resting_start(kind, port)
+    size = next(p.size for p in KINDS[kind].block.inputs if p.name == port)
+    return np.zeros(size) if start is None else np.array(start)
 
 
 def _connections(

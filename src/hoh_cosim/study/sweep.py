@@ -59,6 +59,7 @@ __all__ = [
     "Outcome",
     "Sweep",
     "Variant",
+    "check_scheduler",
     "load_sweep",
     "run_variant",
     "run_variants",
@@ -247,10 +248,11 @@ def _run_on_dask(
             )
             client = Client(cluster)
         else:
+            check_scheduler(scheduler)
             try:
                 _refused(scheduler)
                 client = Client(scheduler, timeout=10)
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, ValueError) as exc:
                 raise ConfigError(
                     f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})"
                 ) from None
@@ -292,6 +294,22 @@ def _simulated_seconds(variants: Sequence[Variant]) -> list[int]:
             duration = durations[v.scenario]
         out.append(round(1e3 * duration * (2.0 if v.engine == "fmu" else 1.0)))
     return out
+
+
+def check_scheduler(scheduler: str) -> None:
+    """Refuse an address Dask cannot read (`--scheduler bogus`) with one line, before any run:
+    Dask's own error is a traceback from deep inside its client."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(scheduler, strict=True)
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(location)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(
+            f"--scheduler {scheduler}: expected a Dask scheduler's address like "
+            f"tcp://10.0.0.5:8786 ({exc})"
+        ) from None
 
 
 def _refused(scheduler: str) -> None:
