@@ -76,8 +76,11 @@ class Plant:
         ),
         Port("surface_rate_m_s", 1, "m/s", "rate of the surface's displacement"),
     )
-    OPTIONAL_INPUTS: ClassVar[frozenset[str]] = frozenset({"surface_offset_m", "surface_rate_m_s"})
-    """Inputs that may be left unconnected: 0 then (a phantom that does not breathe)."""
+    OPTIONAL_INPUTS: ClassVar[frozenset[str]] = frozenset(
+        {"brake_accel", "surface_offset_m", "surface_rate_m_s"}
+    )
+    """Inputs that may be left unconnected: 0 then (no braking command: speedL's own acceleration;
+    a phantom that does not breathe)."""
     outputs: ClassVar[tuple[Port, ...]] = (
         Port("p_BT_B", 3, "m", "TCP (probe tip) position in the base frame"),
         Port("R_BT", 9, "1", "TCP orientation in the base frame, row by row"),

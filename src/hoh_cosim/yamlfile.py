@@ -126,6 +126,9 @@ class Where:
         self.file = str(path)
 
     def error(self, where: str, problem: str) -> ConfigError:
+        # a key may hold any character: escaped where it would not print (a '\r' in a key would
+        # otherwise break the one-line message)
+        where = "".join(c if c.isprintable() else repr(c)[1:-1] for c in where)
         return ConfigError(
             f"{self.file}: {where}: {problem}" if where else f"{self.file}: {problem}"
         )

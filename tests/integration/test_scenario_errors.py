@@ -169,6 +169,12 @@ BAD_SCENARIOS = [
         ["unknown key (expected one of: kind, every, params, fmu)"],
         id="unknown-key-in-component",
     ),
+    pytest.param(  # a key with a carriage return (found by the fuzzer): still one line
+        put("components/plant/\r\nx", 1),
+        "components.plant.\\r\\nx",
+        ["unknown key (expected one of: kind, every, params, fmu)"],
+        id="unknown-key-with-a-line-break",
+    ),
     pytest.param(
         put("components/plant/kind", "robot"),
         "components.plant.kind",
