@@ -265,7 +265,7 @@ def import_filter_libraries(params: EstimatorParams) -> None:
     elif params.filter == "steady_kalman":
         import control  # noqa: F401
     if kernels_enabled():
-        warm_up()
+        warm_up(params.filter)
 
 
 def make_filter_bank(params: EstimatorParams) -> FilterBank:
@@ -396,7 +396,7 @@ class Estimator:
         elif kernels_enabled() and isinstance(self._filters, _SeparateFilters):
             self._filters = compiled_bank(self._filters.filters) or self._filters
         if kernels_enabled():
-            warm_up()  # loaded now, never in the first ticks of a real-time loop
+            warm_up(p.filter)  # loaded now, never in the first ticks of a real-time loop
         self._ft = _SensorChannel("ft_counter", "wrench_S", p.ft_rebias_packets, p.ft_bias)
         self._probe = _SensorChannel(
             "probe_counter", "force_P", p.probe_rebias_packets, p.probe_bias

@@ -550,29 +550,41 @@ def compiled_bank(filters: Sequence[object]) -> KernelButterworthBank | KernelOn
     return None
 
 
-_warm = False
+_warm: set[str] = set()
+"""What `warm_up` has loaded in this process: "estimator" (the Kalman bank, the consistency check,
+the fused tick) and the baseline filters' banks by filter kind."""
+
+_BASELINES = ("one_euro", "butterworth")
 
 
-def warm_up() -> None:
+def warm_up(filter: str | None = None) -> None:
     """Load (or compile) the control kernels now, with the argument types the blocks use (once
-    per process; the blocks call it when they are built)."""
-    global _warm
-    if _warm:
+    per process; the blocks call it when they are built): the estimator's, and the baseline bank of
+    `filter` if it has one (None: every filter's, as a test session does before its workers start).
+    Only the filter in use is loaded: the Butterworth bank's warm-up needs scipy.signal, most of a
+    second of every runner's start for a filter the rig may not use."""
+    wanted = {"estimator", *(b for b in _BASELINES if filter in (None, b))}
+    if wanted <= _warm:
         return
-    _warm = True
     from hoh_cosim.control.baselines import ButterworthParams, OneEuroParams
     from hoh_cosim.control.probe_correction import ProbeCorrectionParams
 
-    bank = KernelKalmanBank([KalmanParams(q=[1.0] * 3, r=[1.0] * 3)] * 3)
-    bank.step_bank(1e-3, (np.zeros(3), None, None))
-    cons = KernelConsistency(ProbeCorrectionParams(), np.zeros(3))
-    cons.step(0.0, np.zeros(3), np.zeros(3), np.zeros(3))
-    cons.attach(bank)
-    bank.set_rotation(np.eye(3))
-    estimator_tick(bank, 1e-3, np.zeros(6), np.zeros(3), np.zeros(9), 0.0, True)
-    euro = KernelOneEuroBank([OneEuroFilter(OneEuroParams())] * 3)
-    for _ in range(2):
-        euro.step_bank(1e-3, (np.zeros(3), None, np.zeros(3)))
-    KernelButterworthBank([ButterworthFilter(ButterworthParams())] * 3).step_bank(
-        1e-3, (np.zeros(3), None, None)
-    )
+    if "estimator" not in _warm:
+        bank = KernelKalmanBank([KalmanParams(q=[1.0] * 3, r=[1.0] * 3)] * 3)
+        bank.step_bank(1e-3, (np.zeros(3), None, None))
+        cons = KernelConsistency(ProbeCorrectionParams(), np.zeros(3))
+        cons.step(0.0, np.zeros(3), np.zeros(3), np.zeros(3))
+        cons.attach(bank)
+        bank.set_rotation(np.eye(3))
+        estimator_tick(bank, 1e-3, np.zeros(6), np.zeros(3), np.zeros(9), 0.0, True)
+        _warm.add("estimator")
+    if "one_euro" in wanted - _warm:
+        euro = KernelOneEuroBank([OneEuroFilter(OneEuroParams())] * 3)
+        for _ in range(2):
+            euro.step_bank(1e-3, (np.zeros(3), None, np.zeros(3)))
+        _warm.add("one_euro")
+    if "butterworth" in wanted - _warm:
+        KernelButterworthBank([ButterworthFilter(ButterworthParams())] * 3).step_bank(
+            1e-3, (np.zeros(3), None, None)
+        )
+        _warm.add("butterworth")
