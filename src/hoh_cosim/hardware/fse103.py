@@ -230,9 +230,13 @@ class FSE103Parser:
     byte order are candidates; 'auto' allows both.
 
     Detection. `framing` and `byte_order` hold the given values, or for 'auto' None until the first
-    synchronisation fixes them. Once fixed, resynchronisation tries only them, until one run of
-    discarded bytes reaches RELOCK_BAD_FRAMES bad frames (the device may have been swapped): then the
-    auto-detected values go back to None and detection starts afresh from there.
+    synchronisation fixes them. Resynchronisation tries the detected values first, then the other
+    allowed ones at the same offset: a device that switched framing or byte order (or was swapped)
+    is found again at its first LOCK_FRAMES frames, as at the start. (Trying only the detected
+    values until RELOCK_BAD_FRAMES bad frames had gone by cost those five frames too: about 200 ms
+    of silence at 50 Hz, against a 250 ms stale limit that a loaded machine's late delivery
+    crossed.) A run of discarded bytes reaching RELOCK_BAD_FRAMES bad frames still forgets the
+    auto-detected values, which only changes how later discarded bytes are counted.
 
     Bad frames. Bytes skipped while searching are discarded. A bad frame is one frame length of
     consecutive discarded bytes, begun: a run of n bytes discarded between two accepted frames
@@ -306,9 +310,15 @@ class FSE103Parser:
         return frames
 
     def _candidates(self) -> list[tuple[str, str]]:
-        framings = (self.framing,) if self.framing else self._framings
-        byte_orders = (self.byte_order,) if self.byte_order else self._byte_orders
-        return list(product(framings, byte_orders))
+        """Every allowed (framing, byte order), the detected ones first: a device that changed
+        framing is found again at its first LOCK_FRAMES frames, not after RELOCK_BAD_FRAMES more."""
+        allowed = list(product(self._framings, self._byte_orders))
+        detected = [
+            c
+            for c in allowed
+            if c[0] == (self.framing or c[0]) and c[1] == (self.byte_order or c[1])
+        ]
+        return detected + [c for c in allowed if c not in detected]
 
     def _search(self, buf: bytearray, i: int) -> tuple[str, tuple[str, str], list[_Decoded]]:
         for candidate in self._candidates():

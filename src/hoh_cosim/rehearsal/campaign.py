@@ -146,8 +146,8 @@ KINDS = {
         Kind("ft_disconnect", (0.1, 1.0), _always, _FT + ": no new sample", STALE_S, _FT),
         Kind("probe_unplug", None, _always, _PROBE, STALE_S, _PROBE),
         Kind("probe_garbage", None, _never),
-        # an auto-detected framing is forgotten after 5 bad frames and found again after 3 good
-        # ones (hoh_cosim.hardware.fse103): 160 ms at 50 Hz, inside the stale limit
+        # the parser tries the other framing where the detected one fails and locks on its first
+        # 3 frames (hoh_cosim.hardware.fse103): 60 ms at 50 Hz, well inside the stale limit
         Kind("probe_framing", None, _never),
         Kind("force_spike", (0.1, 0.5), _always, r"reached the 25 N stop", 0.05),
         Kind("protective_stop", None, _always, r"the robot is in a protective stop"),
