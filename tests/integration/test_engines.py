@@ -238,9 +238,15 @@ def test_export_writes_validated_fmus_an_ssp_and_a_readme(exported):
 
 
 @pytest.mark.parametrize("engine", ["libcosim", "ecos"])
-def test_the_ssp_runs_in_each_engine_as_in_our_master(exported, engine, fmus):
+def test_the_ssp_runs_in_each_engine_as_in_our_master(
+    exported, engine, fmus, tmp_path, monkeypatch
+):
     scenario = load_scenario(ROOT / "scenarios/circles.yaml", duration_s=4.0)
+    system_tmp = tmp_path / "system-tmp"  # where the engine's library would unpack the archive
+    system_tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(system_tmp))
     rec = simulate_external(scenario, engine, fmu_paths=fmus, ssp=exported / "circles.ssp")
+    assert not any(system_tmp.iterdir()), "the engine left its unpacked archive behind"
     same = simulate(
         scenario, "fmu", fmu_paths=fmus, progress=False, coupling=ENGINE_COUPLING[engine]
     )
@@ -272,6 +278,7 @@ def test_a_host_that_is_not_python_runs_the_ssp_with_libpython_preloaded(exporte
         "PATH": f"{Path(sys.prefix) / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
         "VIRTUAL_ENV": sys.prefix,
         "LD_LIBRARY_PATH": str(Path(sys.prefix) / "lib"),
+        "TMPDIR": str(tmp_path),  # ecos unpacks the archive there and never removes it
     }
     command = [str(program), "simulate", "--path", "circles.ssp", "--stepSize", "0.001"]
     command += ["--stopTime", "0.2", "--parameterSet", "scenario", "--noCsv", "-l", "info"]

@@ -31,10 +31,11 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import math
+import os
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -287,6 +288,20 @@ def import_ecospy() -> Any:
     return ecospy
 
 
+@contextlib.contextmanager
+def _temporary_directory(directory: Path) -> Iterator[None]:
+    """`TMPDIR` set to `directory` meanwhile (read by the C++ library's `temp_directory_path`)."""
+    before = os.environ.get("TMPDIR")
+    os.environ["TMPDIR"] = str(directory)
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ["TMPDIR"]
+        else:
+            os.environ["TMPDIR"] = before
+
+
 class _Ecos:
     def __init__(self, system: System, workdir: Path, ssp: Path | None) -> None:
         ecospy = import_ecospy()
@@ -298,7 +313,10 @@ class _Ecos:
         structure = None
         try:
             if ssp is not None:  # ecos takes the base step from us, the FMUs' from the archive
-                self.sim = ecospy.EcosSimulation(ssp_path=str(ssp), step_size=scenario.dt_s)
+                # ecos unpacks an archive under the system's temporary directory and never
+                # removes it: under our work directory instead, which goes with the run
+                with _temporary_directory(workdir):
+                    self.sim = ecospy.EcosSimulation(ssp_path=str(ssp), step_size=scenario.dt_s)
             else:
                 structure = ecospy.EcosSimulationStructure()
                 for name in scenario.components:
