@@ -229,6 +229,12 @@ class HandGuidingController:
         """The release detector and its state (phase, time of the last release)."""
         return self._release
 
+    def prepare(self, dt: float) -> None:
+        """What can be computed before a loop stepped every `dt` (the hold's filter gain), so that
+        no cycle of a robot's loop pays for it."""
+        if self.params.hold.enabled:
+            self._hold.prepare(dt)
+
     @property
     def hold(self) -> ContactHold:
         """Hold-on-release and its state (phase, setpoint, why the last hold ended)."""

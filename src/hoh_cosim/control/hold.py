@@ -6,12 +6,15 @@ abdomen breathes under it: the contact force swings by the breath's depth times 
 stiffness (10 mm on about 1200 N/m is 12 N). Holding the force instead of the position is what the
 hand does freehand, and what this block does once the hand is off the handle.
 
-    engage     in contact (the probe force above `contact_N`), when the release detector tells a
-               release in contact (`ReleasePhase.RELEASED_CONTACT`), or when the hand has asked for
-               nothing for `engage_s`: its compensated force F̃ (eq. 11-12) inside the quiet band,
-               across the probe axis b = max(η, raw band) per base axis as the release detector's,
-               along the axis `axial_band_N` (the probe sensor's error along its axis, which the
-               hand's push there cannot be told from)
+    engage     in contact (the probe force above `contact_N`) for at least `settle_s` (a
+               touch-down's bounce is no release), when the release detector tells a release in
+               contact (`ReleasePhase.RELEASED_CONTACT`), or when the hand has asked for nothing
+               for `engage_s`: its compensated force F̃ (eq. 11-12) inside the quiet band, across
+               the probe axis b = max(η, raw band) per base axis as the release detector's, along
+               the axis `axial_band_N` (the probe sensor's error along its axis, and the two
+               sensors' filters' different lags, which the hand's push there cannot be told from).
+               A hand resting still on the handle cannot be told from no hand: the hold engages
+               then too, and the hand's next push hands back
     setpoint   c_ref: the probe sensor's axial contact force averaged over the last `window_s`
                before the engagement (about a breath: on a breathing patient the force at one
                instant is the breath's phase, the sonographer's level is its mean), clipped to
@@ -59,6 +62,7 @@ leans on it.
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -114,6 +118,7 @@ class HoldParams:
         "contact_N": "N",
         "max_force_N": "N",
         "engage_s": "s",
+        "settle_s": "s",
         "window_s": "s",
         "ramp_N_s": "N/s",
         "axial_band_N": "N",
@@ -141,6 +146,9 @@ class HoldParams:
     contact_N: float = 2.0  # [N] probe force that counts as contact for a hold
     max_force_N: float = 18.0  # [N] the highest setpoint, under the supervisor's 20 N soft cap
     engage_s: float = 0.5  # [s] the hand asks for nothing this long in contact: hold
+    # [s] in contact this long before anything engages a hold: the probe touching down bounces,
+    # and the hand's push falling then reads as a release (the rehearsal's press: at 0.1 s)
+    settle_s: float = 1.0
     window_s: float = 4.0  # [s] the setpoint's average (a breath at 15 a minute)
     ramp_N_s: float = 10.0  # [N/s] the setpoint's way from the force at the engagement
     # [N] the quiet band along the probe axis: the two sensors' filters lag differently, so a
@@ -165,7 +173,15 @@ class HoldParams:
         object.__setattr__(
             self, "raw_band_N", as_nonnegative_vector(self.raw_band_N, 3, "raw_band_N")
         )
-        for name in ("ki", "lookahead_s", "engage_s", "confirm_s", "blend_s", "loss_s"):
+        for name in (
+            "ki",
+            "lookahead_s",
+            "engage_s",
+            "settle_s",
+            "confirm_s",
+            "blend_s",
+            "loss_s",
+        ):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         for name in (
             "stiffness_N_m",
@@ -198,11 +214,22 @@ def surface_observer_gain(params: HoldParams, dt: float) -> Vec:
     """The steady-state gain K (3) of the surface filter: a constant-acceleration Kalman filter
     stepped and corrected every `dt`, measurement variance r = (force_noise_N / k̂)², the
     acceleration's white noise q = ω_n⁶ r dt (ω_n = 2π observer_hz: the continuous filter's
-    bandwidth for a measurement noise density r dt). The Riccati recursion, iterated to its fixed
-    point (a few hundred 3x3 steps, well under a millisecond)."""
-    r = (params.force_noise_N / params.stiffness_N_m) ** 2
-    omega = 2.0 * math.pi * params.observer_hz
-    q = omega**6 * r * dt
+    bandwidth for a measurement noise density r dt). K = P Hᵀ / (H P Hᵀ + r), P the predicted
+    covariance's fixed point (the discrete algebraic Riccati equation, scipy's solver: under a
+    millisecond, against tens for the recursion iterated, which must not run inside a robot's
+    cycle); kept per (noise, stiffness, bandwidth, dt), and `ContactHold.prepare` computes it before
+    a session's loop."""
+    return np.array(
+        _gain(params.force_noise_N, params.stiffness_N_m, params.observer_hz, float(dt))
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _gain(noise_N: float, stiffness_N_m: float, hz: float, dt: float) -> tuple[float, ...]:
+    from scipy.linalg import solve_discrete_are
+
+    r = (noise_N / stiffness_N_m) ** 2
+    q = (2.0 * math.pi * hz) ** 6 * r * dt
     F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
     # filterpy's discrete white-noise model, as hoh_cosim.control.kalman's
     white = np.array(
@@ -212,18 +239,9 @@ def surface_observer_gain(params: HoldParams, dt: float) -> Vec:
             [0.5 * dt**2, dt, 1.0],
         ]
     )
-    Q = (q * dt) * white
-    P = np.diag([r, r / dt**2, r / dt**4])
-    K = np.zeros(3)
-    for _ in range(5000):
-        P = F @ P @ F.T + Q  # predict
-        K_new = P[:, 0] / (P[0, 0] + r)
-        P = P - np.outer(K_new, P[0, :])  # correct
-        P = 0.5 * (P + P.T)
-        if np.allclose(K_new, K, rtol=1e-12, atol=0.0):
-            return K_new
-        K = K_new
-    return K
+    # P = F P Fᵀ - F P Hᵀ (H P Hᵀ + r)⁻¹ H P Fᵀ + Q, H = [1 0 0]: the dual (filter) form
+    P = solve_discrete_are(F.T, np.array([[1.0], [0.0], [0.0]]), (q * dt) * white, np.array([[r]]))
+    return tuple((P[:, 0] / (P[0, 0] + r)).tolist())
 
 
 def _split_norm(F: Vec3, axis: Vec3, band: Vec3, axial_band: float) -> float:
@@ -255,6 +273,7 @@ class ContactHold:
         self._window: deque[tuple[float, float]] | None = None  # the probe's axial force
         self._window_sum = 0.0
         self._quiet_since: float | None = None
+        self._contact_since: float | None = None
         self._surface = [0.0, 0.0, 0.0]  # ŝ, ṡ, s̈ along the axis
         self._integral = 0.0  # [m] ∫ (c_ref - c) / k̂ dt
         self._axis = np.zeros(3)
@@ -278,6 +297,11 @@ class ContactHold:
             self._band_key, self._band_value = key, np.maximum(deadband, self.params.raw_band_N)
             self._band_of = (deadband, self.params)  # keeps the ids valid
         return self._band_value
+
+    def prepare(self, dt: float) -> None:
+        """Compute the surface filter's gain for a step of `dt` now, before a robot's loop, so
+        that no cycle pays for it (an engagement would otherwise)."""
+        self._observer_gain(dt)
 
     def _observer_gain(self, dt: float) -> list[float]:
         key = (id(self.params), dt)
@@ -307,10 +331,14 @@ class ContactHold:
         p = self.params
         contact = float(F_probe_B.dot(F_probe_B)) > p.contact_N * p.contact_N
         if not contact or not axis_B.any():
-            self._quiet_since = None
+            self._quiet_since = self._contact_since = None
             self._window = None
             return False
         self._observe(t, -float(F_probe_B.dot(axis_B)))
+        if self._contact_since is None:
+            self._contact_since = t
+        if t - self._contact_since < p.settle_s - 1e-9:  # a touch-down's bounce is no release
+            return False
         if released_in_contact:
             return True
         if _split_norm(F, axis_B, self._band(deadband), p.axial_band_N) > 1.0:

@@ -344,7 +344,9 @@ class Runner:
         estimator_params, controller_params = sensors.apply(
             estimator_params, self.config.controller
         )
-        return Estimator(estimator_params), HandGuidingController(controller_params)
+        controller = HandGuidingController(controller_params)
+        controller.prepare(self.robot.period_s)
+        return Estimator(estimator_params), controller
 
     def policy(self) -> SessionPolicy:
         """The supervisor's policy for this session's devices and limits."""
