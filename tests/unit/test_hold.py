@@ -135,6 +135,6 @@ def test_the_surface_filter_gain_is_a_stable_fixed_point():
     assert np.max(np.abs(np.linalg.eigvals(closed))) < 1.0
 
 
-def test_hold_params_reject_a_bad_sensor():
-    with pytest.raises(ConfigError, match=r"sensor: expected one of wrist, probe, got 'hand'"):
-        HoldParams(sensor="hand")
+def test_hold_params_reject_a_setpoint_cap_under_the_contact():
+    with pytest.raises(ConfigError, match=r"max_force_N"):
+        HoldParams(contact_N=5.0, max_force_N=4.0)

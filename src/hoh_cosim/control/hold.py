@@ -48,15 +48,15 @@ hand does freehand, and what this block does once the hand is off the handle.
                supervisor's limits (speed, acceleration, soft cap, workspace, stops) apply after it,
                as to every command
 
-Which force: `sensor` = "wrist" regulates the axial component of the wrist sensor's newest packet
-(compensated, unfiltered: `F_hand_meas_B`, hand and contact together), which is the contact alone
-once the hand is off: the FT-150's own noise (0.09 N σ along its z, the probe's axis) and nothing
-else. "probe" regulates the probe sensor's filtered estimate, whose housing hides any change of the
-force smaller than its play (0.2-0.8 N per axis, seed 3.B.2): a loop closed on it lets the true
-force wander across the play each breath. The probe sensor decides contact, the setpoint, the
-soft cap and the stop in either case (docs/decisions.md, "Hold-on-release", derives the bounds and
-measures both). `max_force_N` stays below the supervisor's soft cap (20 N) so that the loop never
-leans on it.
+Which force: the axial component of the wrist sensor's newest packet (compensated, unfiltered:
+`F_hand_meas_B`, hand and contact together), which is the contact alone once the hand is off: the
+FT-150's own noise (0.09 N σ along its z, the probe's axis) and nothing else; the probe sensor's
+estimate only while no wrist packet is wired in. The probe sensor's own estimate is no force to
+regulate on: its housing hides any change smaller than its play (0.2-0.8 N per axis, seed 3.B.2),
+and it comes at 50 Hz through its filter's lag; a loop closed on it at this tuning swung the
+contact by 3.9 N std through the breaths (docs/decisions.md, "Hold-on-release"). The probe sensor
+decides contact, the setpoint, the soft cap and the stop. `max_force_N` stays below the
+supervisor's soft cap (20 N) so that the loop never leans on it.
 """
 
 from __future__ import annotations
@@ -66,25 +66,20 @@ import functools
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar
 
 import numpy as np
 
 from hoh_cosim.control.release import scaled_norm
 from hoh_cosim.control.vectors import Vec, Vec3, as_nonnegative_vector, as_scalar, frozen
-from hoh_cosim.errors import ConfigError
 
 __all__ = [
-    "HOLD_SENSORS",
     "ContactHold",
     "HoldEnd",
     "HoldParams",
     "HoldPhase",
     "surface_observer_gain",
 ]
-
-HoldSensor = Literal["wrist", "probe"]
-HOLD_SENSORS: tuple[str, ...] = ("wrist", "probe")
 
 
 class HoldPhase(enum.IntEnum):
@@ -134,7 +129,6 @@ class HoldParams:
     }
 
     enabled: bool = False
-    sensor: HoldSensor = "wrist"
     # k̂ [N/m]: the tissue's stiffness about the working force (the simulated phantom's is
     # 1000-1560 N/m at 5-20 N; a factor of two either way stays stable, module docstring)
     stiffness_N_m: float = 1200.0
@@ -166,10 +160,6 @@ class HoldParams:
     max_speed: float = 0.05  # [m/s] the hold's own speed limit (breathing needs about 0.02)
 
     def __post_init__(self) -> None:
-        if self.sensor not in HOLD_SENSORS:
-            raise ConfigError(
-                f"sensor: expected one of {', '.join(HOLD_SENSORS)}, got {self.sensor!r}"
-            )
         object.__setattr__(
             self, "raw_band_N", as_nonnegative_vector(self.raw_band_N, 3, "raw_band_N")
         )
@@ -312,9 +302,9 @@ class ContactHold:
 
     def regulated(self, F_meas_B: Vec3 | None, F_probe_B: Vec3, axis_B: Vec3) -> float:
         """The axial contact force the hold regulates, pressing positive: the phantom pushes the
-        probe back along -a, so c = -F·a of the sensor's reading (module docstring); without a
-        wrist packet (None) the probe sensor's."""
-        F = F_meas_B if self.params.sensor == "wrist" and F_meas_B is not None else F_probe_B
+        probe back along -a, so c = -F·a of the wrist's newest packet (module docstring); without
+        one (None) the probe sensor's estimate."""
+        F = F_probe_B if F_meas_B is None else F_meas_B
         return -float(F.dot(axis_B))
 
     def watch(
