@@ -146,8 +146,8 @@ class HoldParams:
     window_s: float = 4.0  # [s] the setpoint's average (a breath at 15 a minute)
     ramp_N_s: float = 10.0  # [N/s] the setpoint's way from the force at the engagement
     # [N] the quiet band along the probe axis: the two sensors' filters lag differently, so a
-    # contact force changing 3 N in 0.1 s (a hand opening on a held probe) reads as up to 2.2 N of
-    # F̃ along the axis for 0.2 s (docs/decisions.md, "Hold-on-release")
+    # contact force changing 3 N in 0.1 s (a hand opening on a held probe) reads as up to 2.6 N of
+    # F̃ along the axis for about 0.2 s (docs/decisions.md, "Hold-on-release")
     axial_band_N: float = 2.5
     raw_band_N: Vec3 = field(default_factory=lambda: frozen([1.15, 1.15, 0.31]))  # across it
     reengage_factor: float = 2.0  # a touch this many bands strong hands back at once
