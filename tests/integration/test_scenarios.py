@@ -286,3 +286,47 @@ def test_a_rerun_replaces_the_earlier_results_whole(tmp_path, capsys):
     assert not (out / "stale.txt").exists()
     assert json.loads((out / "summary.json").read_text())["duration_s"] == 7.5
     capsys.readouterr()
+
+
+def test_hold_on_release_keeps_the_breathing_contact_and_hands_back():
+    """The clinical rig in-process: the hand reaches a view on the breathing abdomen, lets go for
+    6 s, takes the handle again and moves on to the next view. With hold-on-release the contact is
+    kept through the breaths with the hand off and handed back without a step; without it (the
+    release brake alone) the still robot lets the breaths swing the contact force."""
+    from hoh_cosim.cosim.report import compute_report
+
+    hand = (
+        "operator.task=view",
+        "operator.target_force_N=10",
+        "operator.length_m=0.05",
+        "operator.reach_s=5",
+        "operator.let_go_s=10",
+        "operator.retake_s=16",
+        "operator.next_s=17",
+        "controller.release.enabled=true",
+    )
+
+    def run(*overrides: str):
+        scenario = load_scenario(
+            SCENARIOS / "clinical_assisted.yaml", (*hand, *overrides), duration_s=26.0
+        )
+        rec = simulate(scenario, "inprocess", progress=False)
+        return rec, compute_report(scenario, rec).metrics
+
+    rec, m = run("controller.hold.enabled=true")
+    status = rec["controller.status"][:, 0].astype(int)
+    assert np.any(status & int(Status.HOLDING))
+    assert np.any(status & int(Status.HANDING_BACK))
+    assert m["hold_s"] > 6.0
+    assert m["hold_contact_losses"] == 0
+    assert m["contact_losses"] == 0
+    assert m["hold_contact_force_std_N"] < 0.5
+    assert m["handbacks"] >= 1
+    assert m["handback_jump_m"] < 0.003
+    # the hand off, a still robot: the breath's 10 mm on about 1200 N/m
+    rec_still, m_still = run()
+    assert m_still["hold_s"] == 0.0
+    t = rec_still.time
+    hands_off = (np.linalg.norm(rec_still["operator.F_hand_B"], axis=1) == 0.0) & (t > 14.0)
+    pressing = -rec_still["plant.F_contact_B"][:, 2]
+    assert np.std(pressing[hands_off]) > 1.0
