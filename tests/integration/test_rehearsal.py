@@ -508,14 +508,19 @@ def test_hold_on_release_on_a_breathing_phantom_takes_over_and_gives_back(tmp_pa
     status = np.array([m["status"] for m in log.messages["/command"]])
     holding = (status & int(Status.HOLDING)) != 0
     assert np.any(status & int(Status.HANDING_BACK))
-    # while the hand was off: from 7 s after it took the handle (0.5 s after the rebias, when the
-    # loop's clock starts) to 10 s; the middle 2 s of it, with the loop's start and the world's a
-    # few cycles apart on a busy machine
-    t = np.array([m["t"] for m in log.messages["/command"]])
-    off = (t > 8.0) & (t < 10.0)
-    assert np.all(holding[off])
-    force = np.array([m["F_probe_B"][2] for m in log.messages["/estimate"]])[off]
-    z = np.array([m["p_BT_B"][2] for m in log.messages["/robot"]])[off]
+    # the longest hold (it spans the 3 s the hand was off; where the world's clock stands against
+    # the loop's depends on how busy the machine is), without its first and last half second
+    edges = np.diff(np.concatenate([[0], holding.astype(int), [0]]))
+    a, b = max(
+        zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True),
+        key=lambda run: run[1] - run[0],
+    )
+    assert (b - a) * 0.002 > 4.0  # 500 Hz cycles
+    held = slice(a + 250, b - 250)
+    force = np.array([m["F_probe_B"][2] for m in log.messages["/estimate"]])[held]
+    z = np.array([m["p_BT_B"][2] for m in log.messages["/robot"]])[held]
     assert force.min() > 2.0  # never lost
-    assert np.std(force) < 1.0  # a still robot on this breath: 10 mm · 1 N/mm
+    # a still robot on this breath: 10 mm at about 1 N/mm, a std of 3.5 N; a resting hand on the
+    # handle for part of the hold (docs/decisions.md) adds its share
+    assert np.std(force) < 1.5
     assert np.ptp(z) > 0.004  # the robot followed the surface
