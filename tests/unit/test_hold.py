@@ -138,3 +138,19 @@ def test_the_surface_filter_gain_is_a_stable_fixed_point():
 def test_hold_params_reject_a_setpoint_cap_under_the_contact():
     with pytest.raises(ConfigError, match=r"max_force_N"):
         HoldParams(contact_N=5.0, max_force_N=4.0)
+
+
+def test_a_stop_flag_ends_a_hold_and_says_so():
+    """Stale probe data (a stop flag): the controller commands zero, and the hold in progress ends
+    as STOPPED, its count kept, rather than vanishing as if it had never begun."""
+    ctl = holding_controller()
+    patient = Patient(amplitude_m=0.0)
+    run(ctl, patient, 0.0, 4.0)
+    assert ctl.hold.phase == HoldPhase.HOLDING
+    stale = patient.inputs(4.0)
+    stale["probe_age"] = np.array([1.0])
+    out = ctl.step(4.0, DT, stale)
+    assert int(out["status"][0]) & int(Status.STALE_PROBE)
+    assert ctl.hold.phase == HoldPhase.OFF
+    assert ctl.hold.ended == HoldEnd.STOPPED
+    assert ctl.hold.holds == 1

@@ -263,7 +263,7 @@ class HandGuidingController:
             self._release.reset()
             self._variable.reset()
             self._passivity.reset()
-            self._hold.reset()
+            self._hold.stop()
             return {
                 "twist_B": np.zeros(6),
                 "twist_law_B": np.zeros(6),

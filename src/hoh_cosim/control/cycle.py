@@ -245,9 +245,16 @@ def _hold_event(blocks: ControlBlocks) -> Event | None:
     if hold.ended == HoldEnd.HANDED_BACK:
         text = "handed back to the hand"
         return Event("hold", text, "HAND HAS THE PROBE: the robot handed back")
-    why = "the contact was lost" if hold.ended == HoldEnd.CONTACT_LOST else "the tip moved too far"
+    why = _HOLD_ENDS.get(hold.ended, hold.ended.name.lower())
     text = f"hold ended: {why}; at rest until the hand pushes"
     return Event("hold", text, f"ROBOT STOPS HOLDING: {why}; at rest until the hand pushes")
+
+
+_HOLD_ENDS = {
+    HoldEnd.CONTACT_LOST: "the contact was lost",
+    HoldEnd.TRAVEL: "the tip moved too far",
+    HoldEnd.STOPPED: "the controller stopped the robot",
+}
 
 
 def _check_text(estimator: Estimator) -> str:

@@ -97,6 +97,7 @@ class HoldEnd(enum.IntEnum):
     HANDED_BACK = 1  # a touch of the handle
     CONTACT_LOST = 2  # the probe left the patient
     TRAVEL = 3  # the tip moved too far along the axis
+    STOPPED = 4  # the controller commanded zero (a stop flag: stale or bad data, the force stop)
 
 
 @dataclass(frozen=True)
@@ -380,6 +381,15 @@ class ContactHold:
         self.phase = HoldPhase.HOLDING
         self.ended = HoldEnd.NONE
         self.holds += 1
+
+    def stop(self) -> None:
+        """The controller commanded zero (a stop flag): a hold in progress ends (STOPPED), and
+        everything it was watching starts again."""
+        holds, was = self.holds, self.active
+        self.reset()
+        self.holds = holds
+        if was:
+            self.ended = HoldEnd.STOPPED
 
     def _end(self, why: HoldEnd) -> None:
         self.phase = HoldPhase.OFF
