@@ -47,7 +47,15 @@ other scenario keeps its numbers:
   of `plant_models.freehand` (the stiff joint its integrator treats implicitly), and this one off.
 
 The `view` task: press to the target force while moving the tip `length_m` along `direction_B` on
-a minimum-jerk path over `reach_s`, then hold it there (reach a view and keep it).
+a minimum-jerk path over `reach_s`, then hold it there (reach a view and keep it); with `next_s`,
+move on to the next view `next_length_m` further along `direction_B` then, over `reach_s` again
+(0: no next view).
+
+Letting go (for hold-on-release, `hoh_cosim.control.hold`): `let_go_s` after the task's start the
+hand opens, its force falling to nothing over `let_go_ramp_s` (a hand opening on a handle takes
+about a tenth of a second), and stays off the handle until `retake_s`, when it takes the handle
+again and goes on with its task where the task then is (its press loop as it was). Both are 0 by
+default, meaning never: the hand never lets go.
 
 Tasks: `off` (no hand on the handle), `hold` (keep the tip where it was), `circle`, `line` (a line
 scan, back and forth), `press` (press to a target contact force and hold), `scan` (press and line scan
@@ -122,8 +130,14 @@ class OperatorParams:
     force_ki: float = 0.2  # [1/s]
     approach_force_N: float = 1.0  # [N] pushed until contact is felt
     contact_threshold_N: float = 0.5  # [N] contact force that counts as touching
-    # view: the reach's duration (minimum jerk), then hold
+    # view: the reach's duration (minimum jerk), then hold; then, at next_s, the next view
     reach_s: float = 5.0
+    next_s: float = 0.0  # [s] after the start (0: no next view)
+    next_length_m: float = 0.02
+    # letting go of the handle and taking it again, after the start (0: never)
+    let_go_s: float = 0.0
+    let_go_ramp_s: float = 0.1
+    retake_s: float = 0.0
     # push then release
     push_force_B: Vec3 = field(default_factory=lambda: frozen([5.0, 0.0, 0.0]))  # [N]
     release_s: float = 3.0  # [s]
@@ -164,6 +178,11 @@ class OperatorParams:
         "push_force_B": "N",
         "release_s": "s",
         "reach_s": "s",
+        "next_s": "s",
+        "next_length_m": "m",
+        "let_go_s": "s",
+        "let_go_ramp_s": "s",
+        "retake_s": "s",
         "feedforward_B": "N",
         "tremor_rms_N": "N",
         "tremor_hz": "Hz",
@@ -212,6 +231,11 @@ class OperatorParams:
             "tremor_rms_N",
             "grip_stiffness",
             "grip_damping",
+            "next_s",
+            "next_length_m",
+            "let_go_s",
+            "let_go_ramp_s",
+            "retake_s",
         ):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         for name in (
@@ -309,6 +333,10 @@ class Operator:
         self._d_is_axis = sum(x != 0.0 for x in self._d_xyz) == 1  # see `_dot_d`
         self._ff_xyz = p.feedforward_B.tolist() if p.feedforward_B.any() else None
         self._gripping = p.grip_stiffness > 0.0 or p.grip_damping > 0.0
+        # the task's times, 0 meaning never
+        self._next_s = p.next_s if p.next_s > 0.0 else math.inf
+        self._let_go_s = p.let_go_s if p.let_go_s > 0.0 else math.inf
+        self._retake_s = p.retake_s if p.retake_s > 0.0 else math.inf
         self._derived_from = p
 
     def _perceived(
@@ -342,10 +370,15 @@ class Operator:
                     r_dot * (s_ * a2 + c * b2),
                 ),
             )
-        if p.task == "view":  # minimum jerk to the view, then still
-            x = min(tau / p.reach_s, 1.0)
-            s = p.length_m * x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
-            s_dot = p.length_m * 30.0 * x * x * (1.0 - x) * (1.0 - x) / p.reach_s
+        if p.task == "view":  # minimum jerk to the view, then still; then the next one
+            length, since = p.length_m, tau
+            if tau >= self._next_s:
+                length, since = p.next_length_m, tau - self._next_s
+            x = min(since / p.reach_s, 1.0)
+            s = length * x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+            s_dot = length * 30.0 * x * x * (1.0 - x) * (1.0 - x) / p.reach_s
+            if tau >= self._next_s:
+                s += p.length_m
             e0, e1, e2 = self._line_xyz
             return (s * e0, s * e1, s * e2), (s_dot * e0, s_dot * e1, s_dot * e2)
         if p.task in ("line", "scan"):  # back and forth, starting and turning at rest
@@ -384,7 +417,30 @@ class Operator:
             self._origin_xyz = self._origin.tolist()
             self._R_origin = np.array(inputs.get("R_BT", _IDENTITY), dtype=float).reshape(3, 3)
         tau = t_end - p.start_s
+        if self._let_go_s <= tau < self._retake_s:  # the hand lets go, off until it retakes
+            if tau >= self._let_go_s + p.let_go_ramp_s:  # off: the task's reference stays its goal
+                (o0, o1, o2), (x0, x1, x2) = self._origin_xyz, self._reference_xyz(tau)[0]
+                return self._out(_ZERO, np.array((o0 + x0, o1 + x1, o2 + x2)), on=False)
+            opening = 1.0 - (tau - self._let_go_s) / p.let_go_ramp_s
+            out = self._task_step(p, tau, t_end, dt, inputs, p_now, F_contact_seen, p_seen, v_seen)
+            out["F_hand_B"] = out["F_hand_B"] * opening
+            out["tau_hand_B"] = out["tau_hand_B"] * opening
+            return out
+        return self._task_step(p, tau, t_end, dt, inputs, p_now, F_contact_seen, p_seen, v_seen)
 
+    def _task_step(
+        self,
+        p: OperatorParams,
+        tau: float,
+        t_end: float,
+        dt: float,
+        inputs: Mapping[str, Vec],
+        p_now: Vec,
+        F_contact_seen: Sequence[float],
+        p_seen: Sequence[float],
+        v_seen: Sequence[float],
+    ) -> dict[str, Vec]:
+        """The hand on the handle, doing its task `tau` seconds after its start."""
         if p.task == "push_release":
             if t_end < p.release_s:
                 return self._out(self._saturate(p.push_force_B.tolist()), self._origin, on=True)

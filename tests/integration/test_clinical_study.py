@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from hoh_cosim.cli import main
-from hoh_cosim.study.clinical import ASSISTED, MODES, TASKS, study_variants
+from hoh_cosim.study.clinical import ASSISTED, FREEHAND, HOLD, MODES, TASKS, study_variants
 
 # one worker runs this module (tests/xdist_groups.py): the study runs once
 pytestmark = pytest.mark.xdist_group(__name__)
@@ -80,8 +80,13 @@ def test_every_operator_does_every_task_in_every_mode(study) -> None:
         # every run made contact, never lost it, and its metrics were all measurable
         assert float(r["contact_force_mean_N"]) > 3.0
         assert r["contact_losses"] == "0"
-        for key in ("hand_force_rms_N", "jitter_image_mm", "task_time_s", "path_rms_error_m"):
+        for key in ("hand_force_rms_N", "jitter_image_mm", "path_rms_error_m"):
             assert r[key] != "", (r["task"], r["mode"], key)
+        # a goal never reached and held is a result, not a metric that failed: in the short study
+        # the transparency laws may not settle the view within 2 mm and 10 %, and the hold keeps
+        # the force it found, not the hand's target
+        if r["mode"] not in ("transparency", HOLD):
+            assert r["task_time_s"] != "", (r["task"], r["mode"])
     with (out / "operators.csv").open() as f:
         assert len(list(csv.DictReader(f))) == OPERATORS
 
@@ -101,11 +106,60 @@ def test_the_summary_pairs_each_assisted_mode_with_freehand(study) -> None:
                 assert s["min"] == min(s["per_operator"])
                 low, high = s["ci95"]
                 assert low <= s["mean"] <= high
-    # a short study judges no target; the hold-on-release figures come with that mode
-    assert all(t["hand_force_reduction_met"] is None for t in summary["targets"].values())
-    text = json.dumps(summary)
-    for absent in ("handback_jump_m", "hold_on_release"):
-        assert absent not in text
+    # a short study judges no target
+    assert all(
+        t.get("hand_force_reduction_met", t.get("met")) is None for t in summary["targets"].values()
+    )
+
+
+def test_the_transparency_laws_and_hold_on_release_are_modes(study) -> None:
+    assert {"transparency", HOLD} <= set(ASSISTED)
+    assert "controller.passivity.enabled=true" in MODES["transparency"].overrides
+    assert "controller.hold.enabled=true" in MODES[HOLD].overrides
+    _, out = study
+    summary = json.loads((out / "summary.json").read_text())
+    # the transparency laws act: they brake after a release, where today's defaults never do
+    for task in TASKS:
+        flags = " ".join(summary["tasks"][task]["transparency"]["controller_flags"])
+        assert "braking to rest" in flags, (task, flags)
+        assert "braking to rest" not in " ".join(
+            summary["tasks"][task]["defaults"]["controller_flags"]
+        )
+
+
+def test_hold_on_release_holds_the_breathing_contact_and_hands_back(study) -> None:
+    """In the hold mode the hand lets go in contact on the breathing patient and takes the handle
+    again: the robot held the force (its std bounded, no contact lost) and handed back."""
+    _, out = study
+    summary = json.loads((out / "summary.json").read_text())
+    hold = summary["hold_on_release"]
+    assert set(hold) == {name for name, t in TASKS.items() if t.quick_hand_off is not None}
+    assert "view" in hold
+    for task, entry in hold.items():
+        for key in ("contact_force_std_N", "contact_losses", "handback_jump_m"):
+            assert key in entry, (task, key)
+        assert entry["contact_force_std_N"]["n"] == OPERATORS
+        # held through at least a breath with the hand off, steadier than a robot that holds
+        # still (1.5-2.1 N, docs/decisions.md) and no contact lost
+        assert entry["contact_force_std_N"]["max"] < 0.8, task
+        assert entry["contact_losses"]["max"] == 0, task
+        assert entry["hold_s"]["min"] > 4.0, task
+    view = hold["view"]
+    assert view["handbacks"]["min"] >= 1  # the next view's touch handed back
+    assert 0.0 < view["handback_jump_m"]["max"] < 0.005
+    # what the hand did not ask for, across the pressing direction
+    assert view["handback_unasked_m"]["n"] == OPERATORS
+    assert 0.0 <= view["handback_unasked_m"]["max"] < 0.005
+    assert summary["targets"]["hold_on_release"]["met"] is None  # a short study
+    with (out / "runs.csv").open() as f:
+        rows = [r for r in csv.DictReader(f) if r["mode"] == HOLD]
+    assert all("hand released in contact" in r["controller_flags"] for r in rows)
+    assert all(r["hold_s"] == "" for r in _rows(out, FREEHAND))
+
+
+def _rows(out: Path, mode: str) -> list[dict[str, str]]:
+    with (out / "runs.csv").open() as f:
+        return [r for r in csv.DictReader(f) if r["mode"] == mode]
 
 
 def test_an_operator_is_the_same_person_and_patient_in_every_run() -> None:

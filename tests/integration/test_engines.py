@@ -135,7 +135,11 @@ def test_engine_runs_the_scenario_as_our_master_does(engine, name, fmus, gauss_s
         elif key == "velocity_hf_late_rms_m_s":  # one circle's jitter: moves more than the run's
             assert value == pytest.approx(gs_metrics[key], rel=0.03, abs=1e-6), key
         elif key not in LATENCY_METRICS:
-            assert value == pytest.approx(gs_metrics[key], rel=0.01, abs=1e-6), key
+            # within 1 %, or no further than our own master with the engine's coupling (the
+            # contact scan's force spread moves by 1-2 % with the coupling alone)
+            gap = abs(value - gs_metrics[key])
+            own = abs(metrics_same[key] - gs_metrics[key])
+            assert gap <= max(0.01 * abs(gs_metrics[key]), 1.02 * own) + 1e-6, key
 
 
 def test_engines_apply_scheduled_events(fmus, tmp_path):

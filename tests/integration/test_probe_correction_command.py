@@ -15,6 +15,7 @@ from tests.integration.test_scenarios import SCENARIOS
 
 PNG = b"\x89PNG\r\n\x1a\n"
 STOP = "probe force above the stop limit"
+SOFT_CAP = "probe force above the soft cap"
 
 # one worker runs this module (tests/xdist_groups.py): the study is made once
 pytestmark = pytest.mark.xdist_group(__name__)
@@ -63,10 +64,13 @@ def test_only_the_online_map_keeps_contact_compensation_safe_on_day_two(study: P
     summary = json.loads((study / "summary.json").read_text())
     runs = {(r["day"], r["correction"]): r for r in summary["contact_scan"]}
     assert all(r["status"] == "ok" for r in runs.values())
-    assert STOP in runs["day two", "raw"]["controller_flags"]
+    # the raw sensor over-reads along the axis: eq. 12 pushes the probe past the 20 N soft cap
+    # (into the 25 N stop too while the contact's moment still turned the probe, docs/decisions.md)
+    assert SOFT_CAP in runs["day two", "raw"]["controller_flags"]
     assert STOP in runs["day two", "network"]["controller_flags"]
     online = runs["day two", "online"]
     assert STOP not in online["controller_flags"]
+    assert SOFT_CAP not in online["controller_flags"]
     assert online["contact_losses"] == 0
     # the consistency check: the day-one network on day two is flagged most of the scan
     assert runs["day two", "network"]["drift_flagged_fraction"] > 0.5

@@ -221,8 +221,9 @@ def test_replay_with_contact_compensation_off_sets_only_that(log):
         (
             "controller.nope=1",
             "--set controller.nope: unknown parameter of ControllerParams (one of: translation, "
-            "rotation, contact_compensation, virtual_fixture, fixture_threshold_N, fixture_up_B, "
-            "limits, release, variable, passivity, use_probe, ft_period_s, probe_period_s)",
+            "rotation, contact_compensation, contact_torque, virtual_fixture, fixture_threshold_N, "
+            "fixture_up_B, fixture_normal, limits, release, variable, passivity, hold, use_probe, "
+            "ft_period_s, probe_period_s)",
         ),
         (
             "estimator.filter=median",

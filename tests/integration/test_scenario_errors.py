@@ -325,13 +325,13 @@ BAD_SCENARIOS = [
     ),
     pytest.param(
         append_connection("plant.p_BT_B", "controller.p_BT_B"),
-        "connections[23].to",
+        "connections[25].to",
         ["controller.p_BT_B is already fed by connections[19]"],
         id="input-fed-twice",
     ),
     pytest.param(
         append_connection("plant.twist_B[1]", "plant.twist_cmd_B[6]"),
-        "connections[23].to",
+        "connections[25].to",
         ["plant.twist_cmd_B[6] is already fed by connections[2]"],
         id="input-element-fed-twice",
     ),

@@ -87,6 +87,7 @@ METRICS = {
         "contact_force_mean_N": float,
         "contact_force_std_N": float,
         "max_bounce_m": float,
+        "orientation_drift_deg": float,
     },
     "release": {"release_drift_m": float, "release_settle_s": float},
     "probe_data": {
@@ -185,6 +186,30 @@ def test_the_two_engines_agree_with_the_new_laws_through_a_release():
     assert np.any(status & int(Status.BRAKING)), "no tick braked after the release"
 
 
+def _turned_deg(R_BT: np.ndarray) -> float:
+    """The largest angle the probe turned from its first orientation [deg]."""
+    R = R_BT.reshape(-1, 3, 3)
+    cos = 0.5 * (np.einsum("ji,nji->n", R[0], R) - 1.0)
+    return float(np.degrees(np.max(np.arccos(np.clip(cos, -1.0, 1.0)))))
+
+
+def test_the_contact_does_not_turn_the_probe_over_in_a_scan():
+    """contact_scan's friction at the tip, 0.2 m from the wrist sensor, drove the rotational
+    admittance (the contact's moment was left in the hand's torque) and the hand's sideways push at
+    the handle read as a twist about the sensor: the probe turned over within 20 s. With the
+    contact's moment out (eq. 12 for the torque) and the torque taken about the handle it keeps its
+    orientation; without either it turns (each cause alone, then both: the old way)."""
+
+    def turned(*overrides: str) -> float:
+        scenario = load_scenario(SCENARIOS / "contact_scan.yaml", overrides, duration_s=14.0)
+        return _turned_deg(simulate(scenario, "inprocess", progress=False)["plant.R_BT"])
+
+    assert turned() < 1.0
+    assert turned("controller.contact_torque=false") > 2.0  # the contact's moment about the handle
+    assert turned("estimator.p_SR_S=[0,0,0]") > 10.0  # the hand's push read as a twist about S
+    assert turned("controller.contact_torque=false", "estimator.p_SR_S=[0,0,0]") > 40.0
+
+
 def test_same_seed_same_numbers_other_seed_other_noise():
     def run(seed):
         scenario = load_scenario(SCENARIOS / "static_noise.yaml", duration_s=3.0, seed=seed)
@@ -261,3 +286,47 @@ def test_a_rerun_replaces_the_earlier_results_whole(tmp_path, capsys):
     assert not (out / "stale.txt").exists()
     assert json.loads((out / "summary.json").read_text())["duration_s"] == 7.5
     capsys.readouterr()
+
+
+def test_hold_on_release_keeps_the_breathing_contact_and_hands_back():
+    """The clinical rig in-process: the hand reaches a view on the breathing abdomen, lets go for
+    6 s, takes the handle again and moves on to the next view. With hold-on-release the contact is
+    kept through the breaths with the hand off and handed back without a step; without it (the
+    release brake alone) the still robot lets the breaths swing the contact force."""
+    from hoh_cosim.cosim.report import compute_report
+
+    hand = (
+        "operator.task=view",
+        "operator.target_force_N=10",
+        "operator.length_m=0.05",
+        "operator.reach_s=5",
+        "operator.let_go_s=10",
+        "operator.retake_s=16",
+        "operator.next_s=17",
+        "controller.release.enabled=true",
+    )
+
+    def run(*overrides: str):
+        scenario = load_scenario(
+            SCENARIOS / "clinical_assisted.yaml", (*hand, *overrides), duration_s=26.0
+        )
+        rec = simulate(scenario, "inprocess", progress=False)
+        return rec, compute_report(scenario, rec).metrics
+
+    rec, m = run("controller.hold.enabled=true")
+    status = rec["controller.status"][:, 0].astype(int)
+    assert np.any(status & int(Status.HOLDING))
+    assert np.any(status & int(Status.HANDING_BACK))
+    assert m["hold_s"] > 6.0
+    assert m["hold_contact_losses"] == 0
+    assert m["contact_losses"] == 0
+    assert m["hold_contact_force_std_N"] < 0.5
+    assert m["handbacks"] >= 1
+    assert m["handback_jump_m"] < 0.003
+    # the hand off, a still robot: the breath's 10 mm on about 1200 N/m
+    rec_still, m_still = run()
+    assert m_still["hold_s"] == 0.0
+    t = rec_still.time
+    hands_off = (np.linalg.norm(rec_still["operator.F_hand_B"], axis=1) == 0.0) & (t > 14.0)
+    pressing = -rec_still["plant.F_contact_B"][:, 2]
+    assert np.std(pressing[hands_off]) > 1.0

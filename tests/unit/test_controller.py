@@ -173,3 +173,42 @@ def test_mixed_laws_are_applied_per_part():
     tau = np.array([0.3, -0.05, 0.6])
     out = ctl.step(0.0, DT, inputs(tau_hand_B=tau))
     np.testing.assert_allclose(out["twist_law_B"][3:], apply_law(tau, rot))
+
+
+def test_the_fixture_along_the_surface_normal_follows_the_contact_force():
+    """3.F.3 on a slope: the probe force, 30° off the vertical, is the surface's normal. Pushing the
+    probe out of the tilted surface is blocked along that normal with `fixture_normal` = contact;
+    the seed's horizontal plane (fixed, up = z) lets the same push lift the probe off the slope."""
+    n = np.array([np.sin(np.pi / 6), 0.0, np.cos(np.pi / 6)])
+    push = 4.0 * n + np.array([0.0, 3.0, 0.0])  # out of the surface and along it
+    contact = 5.0 * n
+
+    def twist(normal: str) -> np.ndarray:
+        ctl = HandGuidingController(
+            ControllerParams(
+                contact_compensation=False, virtual_fixture=True, fixture_normal=normal
+            )
+        )
+        return settle(ctl, F_hand_B=push, F_probe_B=contact)["twist_B"][:3]
+
+    along = twist("contact")
+    assert along @ n == pytest.approx(0.0, abs=1e-12)  # nothing out of the surface
+    assert abs(along[1]) > 0.01  # sliding along it stays free
+    assert twist("fixed") @ n > 0.005  # the horizontal plane leaves the slope's normal free
+
+
+def test_fixture_normal_is_a_closed_set():
+    with pytest.raises(
+        ConfigError, match=r"fixture_normal: expected one of fixed, contact, got 'up'"
+    ):
+        ControllerParams(fixture_normal="up")
+
+
+def test_the_contact_moment_is_not_the_hands_torque():
+    """Eq. 12 for the torque: the contact's moment about the torque's point (the estimator's
+    tau_probe_B) is taken out of the torque, so a probe pressed with no twist does not turn."""
+    moment = [0.0, 0.8, 0.0]  # a sideways contact force 0.11 m below the handle
+    out = settle(HandGuidingController(), tau_hand_B=moment, tau_probe_B=moment)
+    np.testing.assert_array_equal(out["twist_B"][3:], 0.0)
+    off = HandGuidingController(ControllerParams(contact_torque=False))
+    assert settle(off, tau_hand_B=moment, tau_probe_B=moment)["twist_B"][4] > 0.2

@@ -67,7 +67,8 @@ def test_gravity_is_compensated_while_the_sensor_turns():
 def test_hand_force_comes_out_in_the_base_frame():
     hand = np.array([3.0, -2.0, 1.5])
     torque = np.array([0.2, 0.1, -0.3])
-    est = Estimator(EstimatorParams(**FAST_REBIAS))
+    # the stream's hand pushes at S: its torque about S (p_SR_S = 0) is the hand's twist alone
+    est = Estimator(EstimatorParams(p_SR_S=[0.0, 0.0, 0.0], **FAST_REBIAS))
     stream = SensorStream(
         R_BS=lambda t: TILTED,
         hand_B=lambda t: hand * (t > 0.3),

@@ -4,6 +4,7 @@
     hoh-cosim hw calibrate CONFIG.yaml [--out FILE] [--samples N] [--tilts N] [--directions N]
     hoh-cosim hw sensors [--ft HOST[:PORT]] [--probe DEVICE] [--seconds S] [--json]
     hoh-cosim hw rehearse [--seconds S] [--task TASK] [--rate HZ] [--fault KIND@SECONDS ...]
+                          [--breathing MM] [--let-go S+D]
     hoh-cosim hw emulate [--host 127.0.0.1] [--series e|cb3] [--seconds N] [--allow-remote]
     hoh-cosim hw campaign [--runs N] [--seed S] [--workers W] [--out DIR] [--kinds K,K,...]
     hoh-cosim replay LOG.mcap [--set block.parameter=value ...] [--out DIR]
@@ -59,6 +60,18 @@ def _fault(text: str) -> Fault:
             f"expected finite seconds and a duration >= 0, got {text!r}"
         )
     return Fault(at_s, kind, duration_s)
+
+
+def _let_go(text: str) -> tuple[float, float]:
+    """S+D: the hand lets go S s after it took the handle, and takes it again D s later."""
+    at, plus, duration = text.partition("+")
+    try:
+        at_s, off_s = float(at), float(duration)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected SECONDS+DURATION, got {text!r}") from None
+    if not (plus and math.isfinite(at_s + off_s) and at_s > 0.0 and off_s > 0.0):
+        raise argparse.ArgumentTypeError(f"expected seconds > 0 and a duration > 0, got {text!r}")
+    return at_s, at_s + off_s
 
 
 def _rt_priority(text: str) -> int | None:
@@ -211,6 +224,22 @@ def add_commands(sub: Any) -> None:
         default="circle",
         help="what the emulated operator's hand does (default: circle; press and scan put a "
         "phantom 3 cm under the probe)",
+    )
+    rehearse.add_argument(
+        "--breathing",
+        type=float,
+        default=0.0,
+        metavar="MM",
+        help="the phantom breathes this deep, 15 breaths a minute (a contact task; default: 0)",
+    )
+    rehearse.add_argument(
+        "--let-go",
+        type=_let_go,
+        default=None,
+        metavar="S+D",
+        help="the hand lets go of the handle S s after it took it and takes it again D s later, "
+        "e.g. 6+8: with --set controller.hold.enabled=true the robot holds the contact force "
+        "meanwhile (hold-on-release)",
     )
     rehearse.add_argument(
         "--rate",
@@ -545,6 +574,14 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     log_path = Path(args.log) if args.log else Path("sessions") / f"rehearsal-{_stamp()}.mcap"
     check_writable(log_path.parent, "--log")
     phantom = 0.03 if args.task in CONTACT_TASKS else None
+    if args.breathing and phantom is None:
+        raise ConfigError(
+            f"--breathing: a breathing phantom needs a contact task "
+            f"({', '.join(CONTACT_TASKS)}), got --task {args.task}"
+        )
+    if not 0.0 <= args.breathing <= 30.0:
+        raise ConfigError(f"--breathing: expected millimetres from 0 to 30, got {args.breathing:g}")
+    let_go, retake = args.let_go or (0.0, 0.0)
     estimator, controller = _rehearsal_params(args.overrides)
     setup = Rehearsal(
         seconds=args.seconds,
@@ -554,6 +591,9 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         faults=tuple(args.faults),
         rebias_samples=args.rebias_samples,
         phantom_below_m=phantom,
+        breathing_m=1e-3 * args.breathing,
+        let_go_s=let_go,
+        retake_s=retake,
         realtime_priority=args.rt_priority,
         ur_host=args.ur_emulator,
         estimator=estimator,

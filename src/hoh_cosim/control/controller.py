@@ -5,14 +5,23 @@ Per tick:
     checks     the supervisor's `check_inputs`: non-finite input (latched) · estimator not ready ·
                stale FT-150 or probe data · probe force at the stop limit (latched)
                                                                   → any of these: zero twist, stop flag
-    law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on); v = law(F̃) (eq. 10 or
-               an alternative: `variable` adapts eq. 10's slope to the hand's intent), ω = law(τ_hand)
+    law        F̃ = F_hand - F_probe (eq. 11–12, if contact compensation is on) and, with it,
+               τ̃ = τ_hand - p_RT × F_probe (the contact's moment about the torque's reference
+               point, `contact_torque`); v = law(F̃) (eq. 10 or an alternative: `variable` adapts
+               eq. 10's slope to the hand's intent), ω = law(τ̃)
     release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at
                `max_brake_accel`, until the hand pushes again
+    hold       hold-on-release (`hoh_cosim.control.hold`, if on): in contact, once the hand let go
+               or has asked for nothing a while, the robot holds the probe's axial contact force
+               (a PI along the probe axis) and the rest of the pose, until a touch of the handle
+               hands back (blended) or the contact is lost (then rest)
     passivity  the passivity observer and controller with its energy tank
-               (`hoh_cosim.control.passivity`, if on; not while braking): the command yields to
-               the hand when the robot has given back more energy than it took
-    fixture    while |F_probe| > threshold no upward motion (3.F.3, if on)
+               (`hoh_cosim.control.passivity`, if on; not while braking or holding): the command
+               yields to the hand when the robot has given back more energy than it took
+    fixture    while |F_probe| > threshold no motion out of the surface (3.F.3, if on; not while
+               holding): along `fixture_up_B` (the seed's horizontal plane) or, with
+               `fixture_normal` = contact, along the estimated surface normal, the probe force's
+               direction
     limits     the supervisor's `limit_command`: speed clamp · acceleration clamp (the braking
                deceleration towards rest after a release) · probe-force soft cap · workspace box
 
@@ -24,9 +33,10 @@ UR speedL semantics, and a `Status` (see `hoh_cosim.control.supervisor`) whose `
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -39,8 +49,9 @@ from hoh_cosim.control.admittance import (
     horizontal_fixture,
 )
 from hoh_cosim.control.block import TWIST_UNITS, Port
+from hoh_cosim.control.hold import ContactHold, HoldEnd, HoldParams, HoldPhase
 from hoh_cosim.control.passivity import PassivityController, PassivityParams
-from hoh_cosim.control.release import ReleaseDetector, ReleaseParams
+from hoh_cosim.control.release import ReleaseDetector, ReleaseParams, ReleasePhase
 from hoh_cosim.control.supervisor import (
     LATCHED_FLAGS,
     STOP_FLAGS,
@@ -51,13 +62,19 @@ from hoh_cosim.control.supervisor import (
 )
 from hoh_cosim.control.variable_admittance import VariableAdmittance, VariableAdmittanceParams
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, frozen
+from hoh_cosim.errors import ConfigError
 
-__all__ = ["ControllerParams", "HandGuidingController"]
+__all__ = ["FIXTURE_NORMALS", "ControllerParams", "HandGuidingController"]
+
+FixtureNormal = Literal["fixed", "contact"]
+FIXTURE_NORMALS: tuple[str, ...] = ("fixed", "contact")
 
 _FIXTURE = int(Status.FIXTURE)
 _RELEASED = int(Status.RELEASED)
 _BRAKING = int(Status.BRAKING)
 _PASSIVITY = int(Status.PASSIVITY)
+_HOLDING = int(Status.HOLDING) | _RELEASED  # the hand let go: RELEASED too
+_HANDING_BACK = int(Status.HANDING_BACK)
 _LATCHED = int(LATCHED_FLAGS)
 _STOP = int(STOP_FLAGS)
 
@@ -80,31 +97,45 @@ class ControllerParams:
             "translation",
             "rotation",
             "contact_compensation",
+            "contact_torque",
             "virtual_fixture",
             "fixture_threshold_N",
             "fixture_up_B",
+            "fixture_normal",
             "limits",
             "release",
             "variable",
             "passivity",
+            "hold",
         }
     )
 
     translation: AdmittanceGains = TRANSLATION_GAINS
     rotation: AdmittanceGains = ROTATION_GAINS
     contact_compensation: bool = True  # eq. 11–12
+    # ... and the contact's moment out of the torque (the estimator's tau_probe_B)
+    contact_torque: bool = True
     virtual_fixture: bool = False  # 3.F.3
     fixture_threshold_N: float = 1.0  # [N] contact force that engages the fixture
     fixture_up_B: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 1.0]))  # unit, in B
+    # fixed: no motion along fixture_up_B (the seed's horizontal plane); contact: none along the
+    # estimated surface normal, the probe force's direction
+    fixture_normal: FixtureNormal = "fixed"
     limits: LimitParams = field(default_factory=LimitParams)
     release: ReleaseParams = field(default_factory=ReleaseParams)  # release detection, brake
     variable: VariableAdmittanceParams = field(default_factory=VariableAdmittanceParams)
     passivity: PassivityParams = field(default_factory=PassivityParams)
+    hold: HoldParams = field(default_factory=HoldParams)  # hold-on-release
     use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
     ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
 
     def __post_init__(self) -> None:
+        if self.fixture_normal not in FIXTURE_NORMALS:
+            raise ConfigError(
+                f"fixture_normal: expected one of {', '.join(FIXTURE_NORMALS)}, "
+                f"got {self.fixture_normal!r}"
+            )
         object.__setattr__(self, "fixture_up_B", as_unit_vector(self.fixture_up_B, "fixture_up_B"))
         object.__setattr__(
             self,
@@ -129,6 +160,8 @@ class HandGuidingController:
         Port("ready", 1, "1", "1 when the estimator's outputs are valid"),
         Port("p_BT_B", 3, "m", "measured TCP position in the base frame"),
         Port("F_hand_meas_B", 3, "N", "newest compensated, unfiltered wrist force, in B (held)"),
+        Port("tau_probe_B", 3, "N.m", "the contact force's moment about the torque's point, in B"),
+        Port("probe_axis_B", 3, "1", "the probe's axis in B, a unit vector from handle to tip"),
     )
     outputs: ClassVar[tuple[Port, ...]] = (
         Port(
@@ -169,6 +202,7 @@ class HandGuidingController:
             self._release.params = params.release
             self._variable.params = params.variable
             self._passivity.params = params.passivity
+            self._hold.params = params.hold
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
         tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None
@@ -188,11 +222,23 @@ class HandGuidingController:
         self._release = ReleaseDetector(self.params.release)
         self._variable = VariableAdmittance(self.params.variable)
         self._passivity = PassivityController(self.params.passivity)
+        self._hold = ContactHold(self.params.hold)
 
     @property
     def release(self) -> ReleaseDetector:
         """The release detector and its state (phase, time of the last release)."""
         return self._release
+
+    def prepare(self, dt: float) -> None:
+        """What can be computed before a loop stepped every `dt` (the hold's filter gain), so that
+        no cycle of a robot's loop pays for it."""
+        if self.params.hold.enabled:
+            self._hold.prepare(dt)
+
+    @property
+    def hold(self) -> ContactHold:
+        """Hold-on-release and its state (phase, setpoint, why the last hold ended)."""
+        return self._hold
 
     @property
     def status(self) -> Status:
@@ -217,6 +263,7 @@ class HandGuidingController:
             self._release.reset()
             self._variable.reset()
             self._passivity.reset()
+            self._hold.stop()
             return {
                 "twist_B": np.zeros(6),
                 "twist_law_B": np.zeros(6),
@@ -226,10 +273,16 @@ class HandGuidingController:
 
         F_probe = inputs["F_probe_B"]
         F = inputs["F_hand_B"]
-        if p.use_probe and p.contact_compensation:
+        tau = inputs["tau_hand_B"]
+        compensated = p.use_probe and p.contact_compensation
+        if compensated:
             F = contact_compensated(F, F_probe)
+            tau_probe = inputs.get("tau_probe_B")
+            if p.contact_torque and tau_probe is not None:
+                # τ̃ = τ_hand - p_RT × F_probe: the contact's moment is not the hand's
+                tau = tau - tau_probe
         if self._law6 is not None:
-            twist_law = apply_law(np.concatenate([F, inputs["tau_hand_B"]]), self._law6)
+            twist_law = apply_law(np.concatenate([F, tau]), self._law6)
             v, w = twist_law[:3], twist_law[3:]
         else:
             if p.translation.law == "variable":
@@ -238,14 +291,18 @@ class HandGuidingController:
                 )
             else:
                 v = apply_law(F, p.translation)
-            w = apply_law(inputs["tau_hand_B"], p.rotation)
+            w = apply_law(tau, p.rotation)
             twist_law = np.concatenate([v, w])
 
-        braking = False
-        if p.release.enabled or self._release.released:
+        hold = self._hold
+        holding = hold.active
+        F_raw = None
+        if p.release.enabled or self._release.released or holding or p.hold.enabled:
             F_raw = inputs.get("F_hand_meas_B")
-            if F_raw is not None and p.use_probe and p.contact_compensation:
+            if F_raw is not None and compensated:
                 F_raw = contact_compensated(F_raw, F_probe)
+        braking = False
+        if (p.release.enabled or self._release.released) and not holding:
             braking = self._release.step(
                 t,
                 F,
@@ -258,15 +315,58 @@ class HandGuidingController:
                 v, w = _ZERO3, _ZERO3
                 status |= _RELEASED
 
+        if p.use_probe and (p.hold.enabled or holding):
+            axis = inputs.get("probe_axis_B")
+            if not holding and p.hold.enabled and axis is not None:
+                in_contact = braking and self._release.phase == ReleasePhase.RELEASED_CONTACT
+                if hold.watch(t, F, p.translation.deadband, axis, F_probe, in_contact):
+                    hold.engage(
+                        F, inputs["F_hand_B"], F_probe, axis, inputs["p_BT_B"], self._v_prev
+                    )
+                    holding = True
+            if holding:
+                v_hold = hold.step(
+                    t,
+                    dt,
+                    F,
+                    F_raw,
+                    p.translation.deadband,
+                    inputs.get("F_hand_meas_B"),
+                    F_probe,
+                    inputs["p_BT_B"],
+                    v,
+                )
+                if v_hold is not None:
+                    braking = False
+                    if hold.phase == HoldPhase.HOLDING:
+                        v, w = v_hold, _ZERO3
+                        status |= _HOLDING
+                    else:  # handing back: ω = β ω_law, as v is blended in the hold
+                        v, w = v_hold, hold.blend * w
+                        status |= _HANDING_BACK
+                elif hold.ended == HoldEnd.HANDED_BACK:
+                    self._release.resume()
+                    holding = False
+                else:  # the contact lost, or the tip too far: rest, until the hand pushes
+                    self._release.hold_at_rest(t)
+                    v, w = _ZERO3, _ZERO3
+                    braking = True
+                    holding = False
+                    status |= _RELEASED
+
         if p.passivity.enabled:
             dt_po = self._passivity.observe(t, F, inputs["p_BT_B"])
-            if not braking:
+            if not braking and not holding:
                 v, acted = self._passivity.control(v, F, dt_po)
                 if acted:
                     status |= _PASSIVITY
 
-        if p.use_probe and p.virtual_fixture:
-            v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, p.fixture_up_B)
+        if p.use_probe and p.virtual_fixture and not holding:
+            up = p.fixture_up_B
+            if p.fixture_normal == "contact":
+                size = float(F_probe.dot(F_probe))
+                up = F_probe / math.sqrt(size) if size > 0.0 else up
+            v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, up)
             if engaged:
                 status |= _FIXTURE
         v, w, clamped = limit_command(

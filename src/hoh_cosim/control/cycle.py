@@ -5,7 +5,8 @@
     estimate   Estimator.step (predicts every cycle, corrects when a sample's counter moved)
     command    HandGuidingController.step
     verdict    the supervisor: send the command, send zero, or end the session with the cause
-    events     the probe check ending, the probe sensor drifting away from the wrist or back
+    events     the probe check ending, the probe sensor drifting away from the wrist or back, the
+               robot taking the probe over (hold-on-release) and giving it back
 
 The caller does the I/O around it: the runner reads the robot and the mailboxes and writes speedL and
 the log, replay reads a session log. The packet periods and whether there is a probe sensor are
@@ -22,6 +23,7 @@ import numpy as np
 
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.hold import HoldEnd
 from hoh_cosim.control.supervisor import SessionPolicy, Status, Verdict, supervise
 from hoh_cosim.control.vectors import Rot3, Vec, Vec3, as_scalar
 from hoh_cosim.errors import ConfigError
@@ -147,6 +149,7 @@ class ControlBlocks:
         # the probe check, if any, runs from the first cycle on (the rebias is over by then)
         self.checking = estimator.checking and policy.probe is not None
         self.drifted = False
+        self.holding = False  # hold-on-release has the probe (announced)
         # reused every cycle: the estimator reads them during its step only
         self._ft_counter = np.zeros(1)
         self._probe_counter = np.zeros(1)
@@ -186,6 +189,9 @@ def control_cycle(
     )
     command = controller.step(t, dt, {**estimate, "p_BT_B": reading.p_BT_B})
     events = _session_events(blocks, estimate)
+    hold = _hold_event(blocks)
+    if hold is not None:
+        events.append(hold)
     verdict = supervise(
         blocks.policy,
         Status(int(command["status"][0])),
@@ -221,6 +227,34 @@ def _session_events(blocks: ControlBlocks, estimate: dict[str, Vec]) -> list[Eve
             text = f"the two sensors agree again ({mismatch:.1f} N)"
             events.append(Event("probe drift", text, text))
     return events
+
+
+def _hold_event(blocks: ControlBlocks) -> Event | None:
+    """The robot took the probe over (hold-on-release engaged) or gave it back, if it did in this
+    cycle: one line for the operator, and the log's "hold" event."""
+    hold = blocks.controller.hold
+    if hold.active == blocks.holding:
+        return None
+    blocks.holding = hold.active
+    if hold.active:
+        text = (
+            f"holding the probe's contact force at {hold.target_N:.1f} N along the probe "
+            f"(hold {hold.holds})"
+        )
+        return Event("hold", text, f"ROBOT HOLDS: {text}; touch the handle to take the probe back")
+    if hold.ended == HoldEnd.HANDED_BACK:
+        text = "handed back to the hand"
+        return Event("hold", text, "HAND HAS THE PROBE: the robot handed back")
+    why = _HOLD_ENDS.get(hold.ended, hold.ended.name.lower())
+    text = f"hold ended: {why}; at rest until the hand pushes"
+    return Event("hold", text, f"ROBOT STOPS HOLDING: {why}; at rest until the hand pushes")
+
+
+_HOLD_ENDS = {
+    HoldEnd.CONTACT_LOST: "the contact was lost",
+    HoldEnd.TRAVEL: "the tip moved too far",
+    HoldEnd.STOPPED: "the controller stopped the robot",
+}
 
 
 def _check_text(estimator: Estimator) -> str:

@@ -17,6 +17,10 @@ Seed 000, Fig. 5, per tick:
   with the axes relabelled, and ours stays right when the sensor turns.
 - Alignment (3.C): the estimates are turned into the base frame with the current R_BS, and
   R_BP = R_BS · R_SP for the probe sensor.
+- The contact's lever: the probe tip T (the probe correction's `tip_S`) from the torque reference
+  point R, turned into B, gives the probe's axis in B (handle to tip, `probe_axis_B`) and the
+  moment of the filtered contact force about R (`tau_probe_B` = p_RT_B × F̂_probe_B), which the
+  controller takes out of the torque as eq. 12 takes the force out of the force.
 - Probe correction (`hoh_cosim.control.probe_correction`): each rebiased probe packet goes through
   the correction `probe_correction.kind` names before its filter. With `probe_correction.check_s` > 0
   the rebias is followed by the probe check: for that long the outputs stay zero and `ready` 0 (the
@@ -59,6 +63,7 @@ from hoh_cosim.control.kernels import (
     warm_up,
 )
 from hoh_cosim.control.probe_correction import (
+    HANDLE_S,
     ContactConsistency,
     ProbeCorrection,
     ProbeCorrectionParams,
@@ -165,7 +170,9 @@ class EstimatorParams:
     tool: ToolParams = SEED_TOOL
     g_B: Vec3 = field(default_factory=lambda: GRAVITY_B.copy())  # [m/s²]
     R_SP: Rot3 = field(default_factory=lambda: R_SP_SEED.copy())  # probe sensor P in wrist sensor S
-    p_SR_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, 0.0]))  # [m] torque about R
+    # [m] the point R the torque is taken about: the handle, so that the hand's push there is a
+    # force and only its twist a torque (docs/decisions.md, "Hold-on-release")
+    p_SR_S: Vec3 = field(default_factory=lambda: HANDLE_S.copy())
     probe_mass_kg: float = 0.0  # [kg] what hangs below the probe sensor (the seed: not modelled)
     use_probe: bool = True
     ft_rebias_packets: int = 500  # seed 3.B.1; 0: use ft_bias as given
@@ -379,6 +386,13 @@ class Estimator:
             "probe_mismatch", 1, "N", "low-passed disagreement of the two sensors across the axis"
         ),
         Port("probe_drift", 1, "1", "1 while the mismatch is above its threshold"),
+        Port(
+            "tau_probe_B",
+            3,
+            ("N.m",) * 3,
+            "moment of the filtered contact force about the point R, in B: p_RT_B × F_probe_B",
+        ),
+        Port("probe_axis_B", 3, "1", "the probe's axis in B, a unit vector from handle to tip"),
     )
 
     def __init__(self, params: EstimatorParams | None = None) -> None:
@@ -402,6 +416,12 @@ class Estimator:
             "probe_counter", "force_P", p.probe_rebias_packets, p.probe_bias
         )
         self._shift_torque = bool(np.any(p.p_SR_S != 0.0))
+        # the tip from R, and the axis from the handle to the tip, in S (as float triples: two
+        # 3x3 products and a cross product per tick cost less in floats than in numpy)
+        pc = p.probe_correction
+        self._p_RT_S = (pc.tip_S - p.p_SR_S).tolist()
+        axis = pc.tip_S - pc.handle_S
+        self._axis_S = (axis / math.sqrt(float(axis @ axis))).tolist()
         self._use_probe = p.use_probe
         self._R_SP = p.R_SP
         self._R_PS = p.R_SP.T.copy()
@@ -560,6 +580,8 @@ class Estimator:
                 "probe_check": _FLAG[self._checking],
                 "probe_mismatch": _FLAG[False],
                 "probe_drift": _FLAG[False],
+                "tau_probe_B": _ZERO3,
+                "probe_axis_B": _turned(inputs["R_BS"], self._axis_S),
             }
 
         check = ft_z is not None and self._use_probe
@@ -583,10 +605,16 @@ class Estimator:
         if mismatch != self._mismatch:
             self._mismatch = mismatch
             self._mismatch_out = np.array([mismatch])
+        R9 = inputs["R_BS"]
+        F_probe_B = in_B[2] if self._use_probe else _ZERO3
+        # τ_probe = p_RT_B × F_probe_B, p_RT_B = R_BS p_RT_S: the contact's moment about R
+        r0, r1, r2 = _turned_xyz(R9, self._p_RT_S)
+        f0, f1, f2 = F_probe_B.tolist()
+        tau_probe = np.array((r1 * f2 - r2 * f1, r2 * f0 - r0 * f2, r0 * f1 - r1 * f0))
         return {
             "F_hand_B": in_B[0],
             "tau_hand_B": in_B[1],
-            "F_probe_B": in_B[2] if self._use_probe else _ZERO3,
+            "F_probe_B": F_probe_B,
             "F_hand_meas_B": in_B[3],
             "ft_age": np.array([ft_age]),
             "probe_age": np.array([probe_age]),
@@ -598,4 +626,18 @@ class Estimator:
             "probe_check": _FLAG[self._checking],
             "probe_mismatch": self._mismatch_out,
             "probe_drift": _FLAG[self._mismatch > self._drift_threshold_N],
+            "tau_probe_B": tau_probe,
+            "probe_axis_B": _turned(R9, self._axis_S),
         }
+
+
+def _turned_xyz(R9: Vec, v: list[float]) -> tuple[float, float, float]:
+    """R v for R given row by row (9 values) and v a float triple."""
+    a, b, c, d, e, f, g, h, i = R9.tolist()
+    x, y, z = v
+    return a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z
+
+
+def _turned(R9: Vec, v: list[float]) -> Vec:
+    """`_turned_xyz` as an array."""
+    return np.array(_turned_xyz(R9, v))

@@ -49,8 +49,10 @@ from hoh_cosim.errors import ConfigError
 __all__ = [
     "CORRECTION_KINDS",
     "FEATURES",
+    "HANDLE_S",
     "HIDDEN",
     "NETWORK_SIZE",
+    "TIP_S",
     "ContactConsistency",
     "OnlineProbeMap",
     "ProbeCorrection",
@@ -61,6 +63,12 @@ __all__ = [
     "network_forward",
     "pack_network",
 ]
+
+TIP_S = frozen([0.0, 0.0, -0.200])
+"""[m] The probe tip in the wrist sensor's frame S: 200 mm below it, on its -z axis
+(`plant_models.tool`)."""
+HANDLE_S = frozen([0.0, 0.0, -0.090])
+"""[m] Where the hand holds the handle, in S: 90 mm below it, on the probe's axis."""
 
 CorrectionKind = Literal["none", "network", "online"]
 CORRECTION_KINDS: tuple[str, ...] = ("none", "network", "online")
@@ -186,8 +194,8 @@ class ProbeCorrectionParams:
     reference_sigma_N: float = 0.5
     # the consistency check: where the contact and the hand act, in the wrist sensor's frame
     # (the probe tip 200 mm and the handle 90 mm below S, along -z_S: plant_models.tool)
-    tip_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, -0.200]))
-    handle_S: Vec3 = field(default_factory=lambda: frozen([0.0, 0.0, -0.090]))
+    tip_S: Vec3 = field(default_factory=lambda: TIP_S.copy())
+    handle_S: Vec3 = field(default_factory=lambda: HANDLE_S.copy())
     mismatch_time_constant_s: float = 0.5
     mismatch_threshold_N: float = 2.0  # the play a map without memory leaves, and the grip
 

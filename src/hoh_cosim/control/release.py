@@ -30,8 +30,8 @@ confirmed by the raw packet, decides before the filtered force reaches the deadb
 
 State: the phase (`ReleasePhase`): IDLE (no motion asked), GUIDING (the law commands motion),
 RELEASED_AIR or RELEASED_CONTACT (the hand let go with the probe in the air or in contact with the
-patient). Both released phases brake to rest now; the contact one is kept apart so that a later
-controller can hold the contact force instead.
+patient). Both released phases brake to rest; in contact, hold-on-release
+(`hoh_cosim.control.hold`, if on) then holds the contact force instead of the position.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ class ReleasePhase(enum.IntEnum):
     IDLE = 0  # no motion asked: the force is inside the deadband
     GUIDING = 1  # the law commands motion
     RELEASED_AIR = 2  # the hand let go, the probe in the air: brake to rest
-    RELEASED_CONTACT = 3  # the hand let go with the probe on the patient: brake to rest (for now)
+    RELEASED_CONTACT = 3  # the hand let go with the probe on the patient (hold-on-release, if on)
 
     @property
     def released(self) -> bool:
@@ -138,6 +138,19 @@ class ReleaseDetector:
     @property
     def released(self) -> bool:
         return self.phase.released
+
+    def resume(self) -> None:
+        """The hand has the robot again (a hold-on-release handed back): guiding."""
+        self.phase = ReleasePhase.GUIDING
+        self.t_release = None
+
+    def hold_at_rest(self, t: float) -> None:
+        """Hold the robot at rest from time t until the hand pushes again, as after a release in
+        the air (a hold-on-release that ended without the hand: the contact lost)."""
+        if not self.phase.released:
+            self.releases += 1
+        self.phase = ReleasePhase.RELEASED_AIR
+        self.t_release = t
 
     def _band(self, deadband: Vec3) -> Vec3:
         """b = max(η, raw_band_N), kept while η and the parameters stay the same objects."""

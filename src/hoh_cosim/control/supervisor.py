@@ -94,6 +94,8 @@ class Status(enum.IntFlag):
     STALE_FT = 1 << 10
     STALE_PROBE = 1 << 11
     NOT_READY = 1 << 12
+    HOLDING = 1 << 13  # hold-on-release: the robot holds the probe's contact force
+    HANDING_BACK = 1 << 14  # a touch of the handle: the law's command blended in
 
     @property
     def ok(self) -> bool:
@@ -120,6 +122,8 @@ _DESCRIPTIONS = {
     Status.FORCE_SOFT_CAP: "probe force above the soft cap",
     Status.FIXTURE: "virtual fixture engaged",
     Status.RELEASED: "hand released: holding at rest",
+    Status.HOLDING: "hand released in contact: holding the contact force",
+    Status.HANDING_BACK: "handing back to the hand",
     Status.BRAKING: "braking to rest",
     Status.PASSIVITY: "passivity controller acting",
     Status.FORCE_STOP: "probe force above the stop limit (latched)",

@@ -23,7 +23,19 @@ the robot (a `plant`) or freehand (a `freehand` probe), on a phantom that may br
   within `FORCE_TOLERANCE` of the target; `press` the force within the tolerance; `scan` the
   tip `SCAN_COVERAGE` of the line along it. None (and a note) if never;
 - `path_rms_error_m`: RMS distance between the tip and where the hand wants it (operator.p_ref_B),
-  across the pressing direction, over the measurement window.
+  across the pressing direction, over the measurement window;
+- hold-on-release (`hoh_cosim.control.hold`), from the controller's recorded status (None without
+  one): `hold_s` how long the robot held the contact (the HOLDING flag); `hold_contact_force_std_N`
+  the std of the phantom's force along the pressing direction while it held with the hand off the
+  handle (operator.F_hand_B zero), from `HOLD_SETTLE_S` after the hand let go: the force through
+  the breaths with nobody holding the probe; `hold_contact_losses` the times the tip left the
+  phantom while the robot held; `handbacks` the hand-backs (a touch of the handle: the
+  HANDING_BACK flag), `handback_jump_m` the farthest the tip moved from where it was at a
+  hand-back's start during its blend (the largest over the run's hand-backs): it holds the hand's
+  own first motion and the breath's along the probe too, so it bounds the jump from above;
+  `handback_unasked_m` the part the hand did not ask for: the farthest the tip's displacement
+  across the pressing direction departed from the hand's reference's (operator.p_ref_B) during the
+  blend.
 
 The measurement window starts `CONTACT_SETTLE_S` after the first touch (for `view`, after the reach
 is over, if later) and ends with the run. Every number comes from the recording and the scenario's
@@ -59,6 +71,17 @@ VIEW_TOLERANCE_M = 2e-3
 FORCE_TOLERANCE = 0.10
 SCAN_COVERAGE = 0.95
 GOAL_HOLD_S = 0.5
+HOLD_SETTLE_S = 1.0
+"""[s] After the hand let go, the hold takes over the hand's share of the force (the opening hand
+is a 0.1 s step of a few newtons); the force's std is measured from then."""
+HOLD_METRICS = (
+    "hold_s",
+    "hold_contact_force_std_N",
+    "hold_contact_losses",
+    "handbacks",
+    "handback_jump_m",
+    "handback_unasked_m",
+)
 CLINICAL_METRICS = (
     "hand_force_rms_N",
     "hand_force_peak_N",
@@ -73,6 +96,7 @@ CLINICAL_METRICS = (
     "jitter_rotation_deg",
     "task_time_s",
     "path_rms_error_m",
+    *HOLD_METRICS,
 )
 """Every metric of the set, in the order of the tables."""
 
@@ -236,7 +260,60 @@ def clinical_metrics(scenario: Scenario, rec: Recording) -> tuple[dict[str, obje
             f"clinical: the run ends less than {CONTACT_SETTLE_S:g} s after the first touch or "
             "the reach: no window for the stability metrics"
         )
+    m.update(_hold_metrics(scenario, rec, pressing, depth))
     m["task_time_s"] = _task_time(scenario, rec, pressing)
     if m["task_time_s"] is None and p.task in ("view", "press", "scan"):
         notes.append(f"clinical: the {p.task} task's goal was never reached and held")
     return m, notes
+
+
+def _runs(flag: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) index pairs of the runs of True in `flag`."""
+    edges = np.diff(np.concatenate([[0], flag.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
+
+
+def _hold_metrics(
+    scenario: Scenario, rec: Recording, pressing: np.ndarray, depth: np.ndarray
+) -> dict[str, object]:
+    """The hold-on-release metrics (module docstring)."""
+    from hoh_cosim.control.supervisor import Status
+
+    m: dict[str, object] = dict.fromkeys(HOLD_METRICS)
+    controller = scenario.component_of_kind("controller")
+    op = scenario.component_of_kind("operator")
+    if controller is None or op is None or f"{controller.name}.status" not in rec:
+        return m
+    t = rec.time
+    status = rec[f"{controller.name}.status"][:, 0].astype(np.int64)
+    holding = (status & int(Status.HOLDING)) != 0
+    back = (status & int(Status.HANDING_BACK)) != 0
+    dt = scenario.dt_s
+    m["hold_s"] = float(np.count_nonzero(holding) * dt)
+    touching = depth > 0.0
+    m["hold_contact_losses"] = int(np.count_nonzero(holding[1:] & touching[:-1] & ~touching[1:]))
+    # the hand off the handle, HOLD_SETTLE_S after it let go
+    off = np.linalg.norm(_signal(rec, op, "F_hand_B"), axis=1) == 0.0
+    off &= t >= op.params.start_s
+    settled = np.zeros(len(t), dtype=bool)
+    for a, b in _runs(off):
+        settled[a:b] = t[a:b] >= t[a] + HOLD_SETTLE_S
+    window = holding & settled
+    if np.count_nonzero(window) > 1:
+        m["hold_contact_force_std_N"] = float(np.std(pressing[window]))
+    episodes = _runs(back)
+    m["handbacks"] = len(episodes)
+    if episodes:
+        tip = rec[f"{_arm(scenario).name}.p_BT_B"]
+        ref = _signal(rec, op, "p_ref_B")
+        d = op.params.press_direction_B
+        m["handback_jump_m"] = max(
+            float(np.max(np.linalg.norm(tip[a:b] - tip[a], axis=1))) for a, b in episodes
+        )
+        unasked = 0.0
+        for a, b in episodes:
+            e = (tip[a:b] - tip[a]) - (ref[a:b] - ref[a])
+            across = e - np.outer(e @ d, d)
+            unasked = max(unasked, float(np.max(np.linalg.norm(across, axis=1))))
+        m["handback_unasked_m"] = unasked
+    return m

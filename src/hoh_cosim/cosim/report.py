@@ -30,7 +30,8 @@ parameters (the truth the simulation knows); none is a constant. A metric that t
 - contact_scan (3.F.2, 3.F.3), from the first touch: `contact_losses` times the tip left the
   phantom, `contact_force_mean_N` and `contact_force_std_N` of the force the phantom pushes back with
   along the pressing direction (from 2 s after the first touch), `max_bounce_m` the highest the tip
-  rose above the surface after it.
+  rose above the surface after it, `orientation_drift_deg` the largest angle the probe turned from
+  its orientation at the first touch (when `plant.R_BT` is recorded).
 - release (5.C): `release_drift_m` how far the tip moved after the hand let go (to the end of the
   run), `release_settle_s` how long until its speed stayed under 1 mm/s.
 - teleecho (seed 001, 6.2), the probe pressing and sliding on the phantom, for the Panda under
@@ -281,7 +282,13 @@ def _contact_scan(scenario: Scenario, rec: Recording, report: Report) -> None:
     depth = _signal(rec, plant, "penetration")[:, 0]
     touching = depth > 0.0
     m = report.metrics
-    names = ("contact_losses", "contact_force_mean_N", "contact_force_std_N", "max_bounce_m")
+    names = (
+        "contact_losses",
+        "contact_force_mean_N",
+        "contact_force_std_N",
+        "max_bounce_m",
+        "orientation_drift_deg",
+    )
     if not touching.any():
         report.notes.append("contact_scan: the probe never touched the phantom")
         m.update(dict.fromkeys(names))
@@ -302,6 +309,15 @@ def _contact_scan(scenario: Scenario, rec: Recording, report: Report) -> None:
         )
         m["contact_force_mean_N"] = m["contact_force_std_N"] = None
     m["max_bounce_m"] = float(max(0.0, -np.min(depth[first:])))
+    m["orientation_drift_deg"] = None
+    if f"{plant.name}.R_BT" in rec:
+        R = _signal(rec, plant, "R_BT")[first:].reshape(-1, 3, 3)
+        # the angle of R(t₀)ᵀ R(t): cos θ = (tr - 1) / 2
+        trace = np.einsum("ji,nji->n", R[0], R)
+        angle = np.arccos(np.clip(0.5 * (trace - 1.0), -1.0, 1.0))
+        m["orientation_drift_deg"] = math.degrees(float(np.max(angle)))
+    else:
+        report.notes.append("contact_scan: plant.R_BT not recorded: no orientation drift")
 
 
 @dataclass(frozen=True)

@@ -344,7 +344,9 @@ class Runner:
         estimator_params, controller_params = sensors.apply(
             estimator_params, self.config.controller
         )
-        return Estimator(estimator_params), HandGuidingController(controller_params)
+        controller = HandGuidingController(controller_params)
+        controller.prepare(self.robot.period_s)
+        return Estimator(estimator_params), controller
 
     def policy(self) -> SessionPolicy:
         """The supervisor's policy for this session's devices and limits."""
@@ -371,6 +373,9 @@ class Runner:
             # a filter imports its library when it is built or first stepped (up to a second):
             # imported now, not between two of the watchdog's cycles below
             import_filter_libraries(self.config.estimator)
+            # ... and hold-on-release's filter gain (scipy's Riccati solver): computed now for the
+            # robot's period, so that building the blocks after the rebias finds it made
+            HandGuidingController(self.config.controller).prepare(self.robot.period_s)
 
             self.robot.connect()
             for source in sources:

@@ -120,6 +120,8 @@ CYCLE_LAYOUT: tuple[tuple[str, str, int, dict[str, Any]], ...] = (
     ("/estimate", "probe_check", 1, _NUM),
     ("/estimate", "probe_mismatch", 1, _NUM),
     ("/estimate", "probe_drift", 1, _NUM),
+    ("/estimate", "tau_probe_B", 3, _VECTOR),
+    ("/estimate", "probe_axis_B", 3, _VECTOR),
     ("/command", "twist_B", 6, _VECTOR),
     ("/command", "twist_law_B", 6, _VECTOR),
     ("/command", "status", 1, _INT),
@@ -151,6 +153,8 @@ RESOLUTION: dict[tuple[str, str], int | str] = {
     ("/estimate", "probe_check"): 3,
     ("/estimate", "probe_mismatch"): 3,
     ("/estimate", "probe_drift"): 3,
+    ("/estimate", "tau_probe_B"): 4,  # 0.1 mN·m
+    ("/estimate", "probe_axis_B"): 6,
     ("/command", "twist_B"): 4,  # 0.1 mm/s, 1e-4 rad/s, as the robot's measured twist
     ("/command", "twist_law_B"): 4,
     ("/command", "sent_B"): 4,

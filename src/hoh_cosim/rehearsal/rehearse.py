@@ -136,6 +136,9 @@ class Rehearsal:
     rebias_samples: int = 500
     task_start_s: float | None = None  # None: once the runner says its rebias is done
     phantom_below_m: float | None = None
+    breathing_m: float = 0.0  # the phantom breathes this deep (WorldSetup)
+    let_go_s: float = 0.0  # the hand lets go this long after it took the handle (0: never)
+    retake_s: float = 0.0  # ... and takes it again then (0: never)
     controller: ControllerParams | None = None
     estimator: EstimatorParams | None = None
     seed: int = 1
@@ -169,6 +172,9 @@ def rehearse(
         task=setup.task,
         task_start_s=setup.task_start_s,
         phantom_below_m=setup.phantom_below_m,
+        breathing_m=setup.breathing_m,
+        let_go_s=setup.let_go_s,
+        retake_s=setup.retake_s,
         seed=setup.seed,
         faults=setup.faults,
     )

@@ -39,6 +39,7 @@ from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pac
 from hoh_cosim.rehearsal.faults import FAULTS, Fault
 from hoh_cosim.rehearsal.priorities import HARDWARE_PRIORITY
 from plant_models.arm import ArmParams
+from plant_models.breathing import Breathing, BreathingParams
 from plant_models.operator import TASKS, Operator, OperatorParams
 from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Params, FT150Sensor
@@ -107,6 +108,14 @@ class WorldSetup:
     # `RehearsalWorld.start_task()`, which a rehearsal calls once the rebias is done
     task_start_s: float | None = 4.0
     phantom_below_m: float | None = None  # a flat phantom this far below the tip (press tasks)
+    # the phantom breathes (plant_models.breathing: this depth, 15 breaths a minute, 10 %
+    # irregular, seeded); 0: it stays still
+    breathing_m: float = 0.0
+    # the hand lets go of the handle this long after it took it, and takes it again at retake_s
+    # (plant_models.operator's let_go_s and retake_s; 0: never); a view task then moves on to the
+    # next view a second later
+    let_go_s: float = 0.0
+    retake_s: float = 0.0
     ft_rate_hz: float = 200.0
     probe_framing: str = "seed18"
     probe_byte_order: str = "little"
@@ -118,6 +127,8 @@ class WorldSetup:
     def __post_init__(self) -> None:
         if self.task not in TASKS:
             raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {self.task!r}")
+        if self.breathing_m and self.phantom_below_m is None:
+            raise ConfigError("breathing_m: a breathing phantom needs phantom_below_m, got None")
 
 
 def as_hardware() -> None:
@@ -171,7 +182,26 @@ class _World:
             )
         self.plant = Plant(PlantParams(arm=arm, phantom=phantom))
         start = _HELD if setup.task_start_s is None else setup.task_start_s
-        self.operator = Operator(OperatorParams(task=setup.task, start_s=start))
+        # a view task taken again moves on to the next view (the touch that hands back)
+        next_view = setup.retake_s + 1.0 if setup.task == "view" and setup.retake_s else 0.0
+        self.operator = Operator(
+            OperatorParams(
+                task=setup.task,
+                start_s=start,
+                let_go_s=setup.let_go_s,
+                retake_s=setup.retake_s,
+                next_s=next_view,
+            )
+        )
+        self.breathing = (
+            Breathing(
+                BreathingParams(amplitude_m=setup.breathing_m),
+                rng=np.random.default_rng([setup.seed, 1]),
+            )
+            if setup.breathing_m > 0.0
+            else None
+        )
+        self._surface = {"surface_offset_m": np.zeros(1), "surface_rate_m_s": np.zeros(1)}
         self.task_held = setup.task_start_s is None
         self.go = False
         self._acceleration = np.zeros(1)  # speedL's a of the last command
@@ -379,10 +409,17 @@ class _World:
             start = t + TASK_LEAD_S
             self.operator.retune(dataclasses.replace(self.operator.params, start_s=start))
         hand = self.hand = self.operator.step(t, WORLD_DT, self.outputs)
+        if self.breathing is not None:
+            breath = self.breathing.step(t, WORLD_DT, {})
+            self._surface = {
+                "surface_offset_m": breath["offset_m"],
+                "surface_rate_m_s": breath["rate_m_s"],
+            }
         self.outputs = self.plant.step(
             t,
             WORLD_DT,
             {
+                **self._surface,
                 "twist_cmd_B": twist,
                 # speedL's a as sent: the arm takes it for a command to rest when it brakes
                 # harder than the arm's own acceleration (a release), never otherwise

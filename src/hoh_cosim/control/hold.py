@@ -1,0 +1,498 @@
+"""Hold-on-release: the hand lets go with the probe on the patient, and the robot holds the contact.
+
+The seed's aim (000, 1.A) was to "maneuver to a point-of-interest and then release, having the robot
+do all the strenuous holding". With eq. 10 alone the robot holds the probe still while the patient's
+abdomen breathes under it: the contact force swings by the breath's depth times the tissue's
+stiffness (10 mm on about 1200 N/m is 12 N). Holding the force instead of the position is what the
+hand does freehand, and what this block does once the hand is off the handle.
+
+    engage     in contact (the probe force above `contact_N`) for at least `settle_s` (a
+               touch-down's bounce is no release), when the release detector tells a release in
+               contact (`ReleasePhase.RELEASED_CONTACT`), or when the hand has asked for nothing
+               for `engage_s`: its compensated force F̃ (eq. 11-12) inside the quiet band, across
+               the probe axis b = max(η, raw band) per base axis as the release detector's, along
+               the axis `axial_band_N` (the probe sensor's error along its axis, and the two
+               sensors' filters' different lags, which the hand's push there cannot be told from).
+               A hand resting still on the handle cannot be told from no hand: the hold engages
+               then too, and the hand's next push hands back
+    setpoint   c_ref: the probe sensor's axial contact force averaged over the last `window_s`
+               before the engagement (about a breath: on a breathing patient the force at one
+               instant is the breath's phase, the sonographer's level is its mean), clipped to
+               [`contact_N`, `max_force_N`]; it moves there from the force at the engagement at
+               `ramp_N_s`
+    hold       along the probe axis a (handle to tip, from the estimator), z = p_BT·a the tip's
+               depth coordinate, c the axial contact force (pressing positive):
+                   m = z - (c - c_ref) / k̂         where the tip must be for c = c_ref: the surface
+                                                    plus the depth of c_ref (tissue stiffness k̂)
+                   ŝ, ṡ, s̈  a constant-acceleration Kalman filter on m (steady-state gain,
+                            bandwidth `observer_hz`): the breathing surface, smooth
+                   u = ṡ_τ + k_z (s_τ - z) + k_i ∫ (c_ref - c) / k̂ dt
+                            s_τ, ṡ_τ: the filter's state `lookahead_s` ahead (the robot's delay)
+                   v = u a,   ω = 0
+               With k̂ = k the measurement m does not depend on the robot at all (m = surface +
+               depth): the robot follows a filtered surface (feed-forward) and its own exactly
+               measured position (k_z), so the force sensor's noise reaches the tip only through
+               the filter's band, below the image jitter's 2 Hz; a k̂ off by a factor ρ = k / k̂
+               leaves a loop of gain 1 - ρ, stable for 0 < ρ < 2. The slow integral takes out
+               what the linearisation leaves (the tissue stiffens with depth). Across the axis and
+               in rotation the command is rest: the rest of the pose held
+    hand back  a touch of the handle: F̃ departs from its value at the engagement by more than the
+               quiet band (scaled as above), confirmed by the raw packet and either firm (more than
+               `reengage_factor` bands) or lasting `confirm_s`; the admittance's command is then
+               blended in over `blend_s` (v = (1 - β) v_hold + β v_law, β from 0 to 1), the hold
+               running meanwhile, so the command has no step
+    guards     the hold ends, and the robot brakes to rest, when the contact is lost (the probe force
+               under `loss_N`) for `loss_s` or while the tip moved `loss_m` along the axis, or when
+               the tip has moved `max_travel_m` along the axis from where the hold began: it never
+               chases a patient who moved away. Its own speed is at most `max_speed`; the
+               supervisor's limits (speed, acceleration, soft cap, workspace, stops) apply after it,
+               as to every command
+
+Which force: the axial component of the wrist sensor's newest packet (compensated, unfiltered:
+`F_hand_meas_B`, hand and contact together), which is the contact alone once the hand is off: the
+FT-150's own noise (0.09 N σ along its z, the probe's axis) and nothing else; the probe sensor's
+estimate only while no wrist packet is wired in. The probe sensor's own estimate is no force to
+regulate on: its housing hides any change smaller than its play (0.2-0.8 N per axis, seed 3.B.2),
+and it comes at 50 Hz through its filter's lag; a loop closed on it at this tuning swung the
+contact by 3.9 N std through the breaths (docs/decisions.md, "Hold-on-release"). The probe sensor
+decides contact, the setpoint, the soft cap and the stop. `max_force_N` stays below the
+supervisor's soft cap (20 N) so that the loop never leans on it.
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hoh_cosim.control.release import scaled_norm
+from hoh_cosim.control.vectors import Vec, Vec3, as_nonnegative_vector, as_scalar, frozen
+
+__all__ = [
+    "ContactHold",
+    "HoldEnd",
+    "HoldParams",
+    "HoldPhase",
+    "surface_observer_gain",
+]
+
+
+class HoldPhase(enum.IntEnum):
+    """What the hold does."""
+
+    OFF = 0  # the admittance law has the robot
+    HOLDING = 1  # the robot holds the contact force, the hand is off
+    BLENDING = 2  # handing back: the law's command is blended in
+
+
+class HoldEnd(enum.IntEnum):
+    """Why the last hold ended."""
+
+    NONE = 0
+    HANDED_BACK = 1  # a touch of the handle
+    CONTACT_LOST = 2  # the probe left the patient
+    TRAVEL = 3  # the tip moved too far along the axis
+    STOPPED = 4  # the controller commanded zero (a stop flag: stale or bad data, the force stop)
+
+
+@dataclass(frozen=True)
+class HoldParams:
+    """Hold-on-release (module docstring). Off by default: see docs/decisions.md."""
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "stiffness_N_m": "N/m",
+        "force_noise_N": "N",
+        "observer_hz": "Hz",
+        "position_gain": "1/s",
+        "ki": "1/s",
+        "lookahead_s": "s",
+        "contact_N": "N",
+        "max_force_N": "N",
+        "engage_s": "s",
+        "settle_s": "s",
+        "window_s": "s",
+        "ramp_N_s": "N/s",
+        "axial_band_N": "N",
+        "raw_band_N": "N",
+        "reengage_factor": "1",
+        "confirm_s": "s",
+        "blend_s": "s",
+        "loss_N": "N",
+        "loss_s": "s",
+        "loss_m": "m",
+        "max_travel_m": "m",
+        "max_speed": "m/s",
+    }
+
+    enabled: bool = False
+    # k̂ [N/m]: the tissue's stiffness about the working force (the simulated phantom's is
+    # 1000-1560 N/m at 5-20 N; a factor of two either way stays stable, module docstring)
+    stiffness_N_m: float = 1200.0
+    force_noise_N: float = 0.09  # [N] σ of the regulated force's packets (FT-150 along z)
+    observer_hz: float = 1.5  # the surface filter's bandwidth: breathing passes, tremor-band not
+    position_gain: float = 10.0  # k_z [1/s]
+    ki: float = 0.5  # k_i [1/s]: the force error's slow integral
+    lookahead_s: float = 0.02  # [s] the robot's delay, predicted over
+    contact_N: float = 2.0  # [N] probe force that counts as contact for a hold
+    max_force_N: float = 18.0  # [N] the highest setpoint, under the supervisor's 20 N soft cap
+    engage_s: float = 0.5  # [s] the hand asks for nothing this long in contact: hold
+    # [s] in contact this long before anything engages a hold: the probe touching down bounces,
+    # and the hand's push falling then reads as a release (the rehearsal's press: at 0.1 s)
+    settle_s: float = 1.0
+    window_s: float = 4.0  # [s] the setpoint's average (a breath at 15 a minute)
+    ramp_N_s: float = 10.0  # [N/s] the setpoint's way from the force at the engagement
+    # [N] the quiet band along the probe axis: the two sensors' filters lag differently, so a
+    # contact force changing 3 N in 0.1 s (a hand opening on a held probe) reads as up to 2.6 N of
+    # F̃ along the axis for about 0.2 s (docs/decisions.md, "Hold-on-release")
+    axial_band_N: float = 2.5
+    raw_band_N: Vec3 = field(default_factory=lambda: frozen([1.15, 1.15, 0.31]))  # across it
+    reengage_factor: float = 2.0  # a touch this many bands strong hands back at once
+    confirm_s: float = 0.15  # [s] ... a weaker one (above one band) after this long
+    blend_s: float = 0.2  # [s] the hand-back's blend
+    loss_N: float = 0.5  # [N] probe force under which the contact is lost
+    loss_s: float = 0.2  # [s] lost this long: the hold ends
+    loss_m: float = 0.003  # [m] ... or the tip moved this far along the axis while lost
+    max_travel_m: float = 0.03  # [m] the farthest the hold moves the tip along the axis
+    max_speed: float = 0.05  # [m/s] the hold's own speed limit (breathing needs about 0.02)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "raw_band_N", as_nonnegative_vector(self.raw_band_N, 3, "raw_band_N")
+        )
+        for name in (
+            "ki",
+            "lookahead_s",
+            "engage_s",
+            "settle_s",
+            "confirm_s",
+            "blend_s",
+            "loss_s",
+        ):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
+        for name in (
+            "stiffness_N_m",
+            "force_noise_N",
+            "observer_hz",
+            "position_gain",
+            "window_s",
+            "ramp_N_s",
+            "contact_N",
+            "axial_band_N",
+            "loss_N",
+            "loss_m",
+            "max_travel_m",
+            "max_speed",
+        ):
+            object.__setattr__(
+                self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
+            )
+        object.__setattr__(
+            self,
+            "max_force_N",
+            as_scalar(self.max_force_N, "max_force_N", low=self.contact_N),
+        )
+        object.__setattr__(
+            self, "reengage_factor", as_scalar(self.reengage_factor, "reengage_factor", low=1.0)
+        )
+
+
+def surface_observer_gain(params: HoldParams, dt: float) -> Vec:
+    """The steady-state gain K (3) of the surface filter: a constant-acceleration Kalman filter
+    stepped and corrected every `dt`, measurement variance r = (force_noise_N / k̂)², the
+    acceleration's white noise q = ω_n⁶ r dt (ω_n = 2π observer_hz: the continuous filter's
+    bandwidth for a measurement noise density r dt). K = P Hᵀ / (H P Hᵀ + r), P the predicted
+    covariance's fixed point (the discrete algebraic Riccati equation, scipy's solver: under a
+    millisecond, against tens for the recursion iterated, which must not run inside a robot's
+    cycle); kept per (noise, stiffness, bandwidth, dt), and `ContactHold.prepare` computes it before
+    a session's loop."""
+    return np.array(
+        _gain(params.force_noise_N, params.stiffness_N_m, params.observer_hz, float(dt))
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _gain(noise_N: float, stiffness_N_m: float, hz: float, dt: float) -> tuple[float, ...]:
+    from scipy.linalg import solve_discrete_are
+
+    r = (noise_N / stiffness_N_m) ** 2
+    q = (2.0 * math.pi * hz) ** 6 * r * dt
+    F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    # filterpy's discrete white-noise model, as hoh_cosim.control.kalman's
+    white = np.array(
+        [
+            [0.25 * dt**4, 0.5 * dt**3, 0.5 * dt**2],
+            [0.5 * dt**3, dt**2, dt],
+            [0.5 * dt**2, dt, 1.0],
+        ]
+    )
+    # P = F P Fᵀ - F P Hᵀ (H P Hᵀ + r)⁻¹ H P Fᵀ + Q, H = [1 0 0]: the dual (filter) form
+    P = solve_discrete_are(F.T, np.array([[1.0], [0.0], [0.0]]), (q * dt) * white, np.array([[r]]))
+    return tuple((P[:, 0] / (P[0, 0] + r)).tolist())
+
+
+def _split_norm(F: Vec3, axis: Vec3, band: Vec3, axial_band: float) -> float:
+    """max(‖F_⊥ ⊘ b‖, |F·a| / b_a): F's size against the quiet band, across and along the axis."""
+    f0, f1, f2 = F.tolist()
+    a0, a1, a2 = axis.tolist()
+    along = f0 * a0 + f1 * a1 + f2 * a2
+    across = np.array((f0 - along * a0, f1 - along * a1, f2 - along * a2))
+    return max(scaled_norm(across, band), abs(along) / axial_band)
+
+
+class ContactHold:
+    """The hold's state machine and its force law (module docstring), stepped by the controller."""
+
+    def __init__(self, params: HoldParams | None = None) -> None:
+        self.params = params or HoldParams()
+        self._gain_key: tuple[int, float] | None = None
+        self._gain = np.zeros(3)
+        self.reset()
+
+    def reset(self) -> None:
+        self.phase = HoldPhase.OFF
+        self.setpoint_N = 0.0  # c_ref now
+        self.target_N = 0.0  # where c_ref is going: the level before the engagement
+        self.force_N = 0.0  # the regulated force, last tick
+        self.ended = HoldEnd.NONE  # why the last hold ended
+        self.holds = 0  # holds begun since the reset
+        self.blend = 0.0  # β: 0 while holding, rising to 1 while handing back
+        self._window: deque[tuple[float, float]] | None = None  # the probe's axial force
+        self._window_sum = 0.0
+        self._quiet_since: float | None = None
+        self._contact_since: float | None = None
+        self._surface = [0.0, 0.0, 0.0]  # ŝ, ṡ, s̈ along the axis
+        self._integral = 0.0  # [m] ∫ (c_ref - c) / k̂ dt
+        self._axis = np.zeros(3)
+        self._F0 = np.zeros(3)  # F̃ at the engagement
+        self._p0 = 0.0  # the tip along the axis at the engagement
+        self._touch_since: float | None = None
+        self._t_back: float | None = None
+        self._lost_since: float | None = None
+        self._lost_at = 0.0  # the tip along the axis when the contact was lost
+        self._band_key: tuple[int, int] | None = None
+        self._band_value = np.zeros(3)
+
+    @property
+    def active(self) -> bool:
+        return self.phase != HoldPhase.OFF
+
+    def _band(self, deadband: Vec3) -> Vec3:
+        """b = max(η, raw_band_N), kept while η and the parameters stay the same objects."""
+        key = (id(deadband), id(self.params))
+        if self._band_key != key:
+            self._band_key, self._band_value = key, np.maximum(deadband, self.params.raw_band_N)
+            self._band_of = (deadband, self.params)  # keeps the ids valid
+        return self._band_value
+
+    def prepare(self, dt: float) -> None:
+        """Compute the surface filter's gain for a step of `dt` now, before a robot's loop, so
+        that no cycle pays for it (an engagement would otherwise)."""
+        self._observer_gain(dt)
+
+    def _observer_gain(self, dt: float) -> list[float]:
+        key = (id(self.params), dt)
+        if self._gain_key != key:
+            self._gain_key, self._gain = key, surface_observer_gain(self.params, dt)
+            self._gain_of = self.params  # keeps the id valid
+        return self._gain.tolist()
+
+    def regulated(self, F_meas_B: Vec3 | None, F_probe_B: Vec3, axis_B: Vec3) -> float:
+        """The axial contact force the hold regulates, pressing positive: the phantom pushes the
+        probe back along -a, so c = -F·a of the wrist's newest packet (module docstring); without
+        one (None) the probe sensor's estimate."""
+        F = F_probe_B if F_meas_B is None else F_meas_B
+        return -float(F.dot(axis_B))
+
+    def watch(
+        self,
+        t: float,
+        F: Vec3,
+        deadband: Vec3,
+        axis_B: Vec3,
+        F_probe_B: Vec3,
+        released_in_contact: bool,
+    ) -> bool:
+        """While off: whether to engage now (module docstring): a release in contact, or the hand
+        quiet (F̃ inside the quiet band) in contact for `engage_s`. Keeps the setpoint's window."""
+        p = self.params
+        contact = float(F_probe_B.dot(F_probe_B)) > p.contact_N * p.contact_N
+        if not contact or not axis_B.any():
+            self._quiet_since = self._contact_since = None
+            self._window = None
+            return False
+        self._observe(t, -float(F_probe_B.dot(axis_B)))
+        if self._contact_since is None:
+            self._contact_since = t
+        if t - self._contact_since < p.settle_s - 1e-9:  # a touch-down's bounce is no release
+            return False
+        if released_in_contact:
+            return True
+        if _split_norm(F, axis_B, self._band(deadband), p.axial_band_N) > 1.0:
+            self._quiet_since = None
+            return False
+        if self._quiet_since is None:
+            self._quiet_since = t
+        return t - self._quiet_since >= p.engage_s - 1e-9
+
+    def _observe(self, t: float, c_probe: float) -> None:
+        """One tick of the setpoint's window (the probe's axial force in contact)."""
+        window = self._window
+        if window is None:
+            self._window = window = deque()
+            self._window_sum = 0.0
+        window.append((t, c_probe))
+        self._window_sum += c_probe
+        while t - window[0][0] >= self.params.window_s - 1e-9:
+            self._window_sum -= window.popleft()[1]
+
+    def engage(
+        self,
+        F: Vec3,
+        F_meas_B: Vec3 | None,
+        F_probe_B: Vec3,
+        axis_B: Vec3,
+        p_BT_B: Vec3,
+        v_prev: Vec3,
+    ) -> None:
+        """Begin a hold: the setpoint starts at the regulated force now and moves to the level
+        before it; the surface filter starts where the tip is, at its last commanded speed along
+        the axis (no step in the command)."""
+        p = self.params
+        self._axis = axis_B.copy()
+        c = self.regulated(F_meas_B, F_probe_B, axis_B)
+        level = c if not self._window else self._window_sum / len(self._window)
+        self.target_N = min(max(level, p.contact_N), p.max_force_N)
+        self.setpoint_N = c
+        self.force_N = c
+        self._window = None
+        z = float(p_BT_B.dot(axis_B))
+        self._surface = [z, float(v_prev.dot(axis_B)), 0.0]
+        self._integral = 0.0
+        self._F0 = F.copy()
+        self._p0 = z
+        self._touch_since = self._t_back = self._lost_since = None
+        self._quiet_since = None
+        self.blend = 0.0
+        self.phase = HoldPhase.HOLDING
+        self.ended = HoldEnd.NONE
+        self.holds += 1
+
+    def stop(self) -> None:
+        """The controller commanded zero (a stop flag): a hold in progress ends (STOPPED), and
+        everything it was watching starts again."""
+        holds, was = self.holds, self.active
+        self.reset()
+        self.holds = holds
+        if was:
+            self.ended = HoldEnd.STOPPED
+
+    def _end(self, why: HoldEnd) -> None:
+        self.phase = HoldPhase.OFF
+        self.ended = why
+        self.blend = 0.0
+        self._quiet_since = None
+
+    def _law(self, dt: float, c: float, z: float) -> float:
+        """The hold's speed along the axis (module docstring)."""
+        p = self.params
+        k = p.stiffness_N_m
+        # the setpoint on its way to the level before the engagement
+        step = p.ramp_N_s * dt
+        self.setpoint_N += min(max(self.target_N - self.setpoint_N, -step), step)
+        e = self.setpoint_N - c
+        # m = z - (c - c_ref) / k̂: where the tip must be; the surface filter predicts, corrects
+        m = z + e / k
+        s, s_dot, s_ddot = self._surface
+        s, s_dot = s + dt * s_dot + 0.5 * dt * dt * s_ddot, s_dot + dt * s_ddot
+        k0, k1, k2 = self._observer_gain(dt)
+        innovation = m - s
+        s, s_dot, s_ddot = s + k0 * innovation, s_dot + k1 * innovation, s_ddot + k2 * innovation
+        self._surface = [s, s_dot, s_ddot]
+        # u = ṡ_τ + k_z (s_τ - z) + k_i ∫ e / k̂ dt, the filter's state τ ahead
+        tau = p.lookahead_s
+        s_ahead = s + tau * s_dot + 0.5 * tau * tau * s_ddot
+        u = s_dot + tau * s_ddot + p.position_gain * (s_ahead - z) + p.ki * self._integral
+        limit = p.max_speed
+        # integrate unless the command is at the hold's speed limit and the error drives it on
+        if not ((u >= limit and e > 0.0) or (u <= -limit and e < 0.0)):
+            self._integral += e / k * dt
+        return min(max(u, -limit), limit)
+
+    def step(
+        self,
+        t: float,
+        dt: float,
+        F: Vec3,
+        F_raw: Vec3 | None,
+        deadband: Vec3,
+        F_meas_B: Vec3 | None,
+        F_probe_B: Vec3,
+        p_BT_B: Vec3,
+        v_law: Vec3,
+    ) -> Vec | None:
+        """One tick of an active hold: the linear velocity to command (the angular one is rest while
+        holding, β ω_law while handing back), or None when the hold has just ended (`ended` says
+        why; HANDED_BACK after the blend, when the law has the robot again). `F` and `F_raw` are
+        the compensated hand force, filtered and raw, `F_meas_B` the raw wrist packet (hand and
+        contact, uncompensated)."""
+        p = self.params
+        a = self._axis
+        z = float(p_BT_B.dot(a))
+        # guards: the contact lost, or the tip too far from where the hold began
+        if float(F_probe_B.dot(F_probe_B)) < p.loss_N * p.loss_N:
+            if self._lost_since is None:
+                self._lost_since, self._lost_at = t, z
+            elif t - self._lost_since >= p.loss_s - 1e-9 or abs(z - self._lost_at) >= p.loss_m:
+                self._end(HoldEnd.CONTACT_LOST)
+                return None
+        else:
+            self._lost_since = None
+        if abs(z - self._p0) >= p.max_travel_m:
+            self._end(HoldEnd.TRAVEL)
+            return None
+
+        c = self.force_N = self.regulated(F_meas_B, F_probe_B, a)
+        v_hold = self._law(dt, c, z) * a
+
+        if self.phase == HoldPhase.BLENDING:
+            assert self._t_back is not None
+            beta = 1.0 if p.blend_s <= 0.0 else (t - self._t_back) / p.blend_s
+            if beta >= 1.0 - 1e-9:
+                self._end(HoldEnd.HANDED_BACK)
+                return None
+            self.blend = beta
+            # v = (1 - β) v_hold + β v_law
+            return (1.0 - beta) * v_hold + beta * v_law
+
+        # a touch of the handle: F̃ away from its value at the engagement and from nothing (the hand
+        # opening, F̃ falling from its value at the engagement to nothing, is no touch), confirmed
+        band = self._band(deadband)
+        n = min(
+            _split_norm(F - self._F0, a, band, p.axial_band_N),
+            _split_norm(F, a, band, p.axial_band_N),
+        )
+        raw = F_raw is None or (
+            min(
+                _split_norm(F_raw - self._F0, a, band, p.axial_band_N),
+                _split_norm(F_raw, a, band, p.axial_band_N),
+            )
+            > 1.0
+        )
+        if n > 1.0 and raw:
+            if self._touch_since is None:
+                self._touch_since = t
+            if n > p.reengage_factor or t - self._touch_since >= p.confirm_s - 1e-9:
+                self.phase = HoldPhase.BLENDING
+                self._t_back = t
+                if p.blend_s <= 0.0:
+                    self._end(HoldEnd.HANDED_BACK)
+                    return None
+                return v_hold  # β = 0 on the touch's tick
+        else:
+            self._touch_since = None
+        return v_hold

@@ -1,0 +1,156 @@
+"""Hold-on-release in the controller: engagement on a release in contact, the force held along the
+probe axis against a moving surface, hand-back blended without a step, the guards."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hoh_cosim.control.controller import ControllerParams, HandGuidingController
+from hoh_cosim.control.hold import HoldEnd, HoldParams, HoldPhase, surface_observer_gain
+from hoh_cosim.control.release import ReleaseParams
+from hoh_cosim.control.supervisor import Status
+from hoh_cosim.errors import ConfigError
+from tests.estimates import controller_inputs
+
+DT = 8e-3  # the CB3's 125 Hz
+AXIS = np.array([0.0, 0.0, -1.0])  # the probe points down
+K = 1200.0  # [N/m] the tissue
+
+
+class Patient:
+    """A breathing surface under a robot that integrates its commanded speed: the contact force is
+    k (surface - tip) along the axis, the wrist reads hand and contact, the probe sensor contact."""
+
+    def __init__(self, amplitude_m: float = 0.01, rate_hz: float = 0.25) -> None:
+        self.z = 0.3 - 0.008  # the tip, 8 mm into a surface at 0.3 m (9.6 N)
+        self.amplitude, self.rate = amplitude_m, rate_hz
+
+    def surface(self, t: float) -> float:
+        return 0.3 + self.amplitude * np.sin(2 * np.pi * self.rate * t)
+
+    def force(self, t: float) -> float:
+        return max(0.0, K * (self.surface(t) - self.z))
+
+    def inputs(self, t: float, hand_N: float = 0.0, hand_x_N: float = 0.0) -> dict:
+        c = self.force(t)
+        contact = -c * AXIS  # the phantom pushes the probe up
+        hand = np.array([hand_x_N, 0.0, -hand_N])
+        return controller_inputs(
+            F_hand_B=hand + contact,  # the wrist's estimate: eq. 11-12 leaves the hand
+            F_probe_B=contact,
+            F_hand_meas_B=hand + contact,
+            p_BT_B=[0.3, 0.0, self.z],
+            probe_axis_B=AXIS,
+        )
+
+
+def run(ctl, patient, t0, t1, **hand):
+    forces, flags, xs = [], [], []
+    x = 0.0
+    for k in range(round(t0 / DT), round(t1 / DT)):
+        t = k * DT
+        out = ctl.step(t, DT, patient.inputs(t, **hand))
+        patient.z += out["twist_B"][2] * DT
+        x += out["twist_B"][0] * DT
+        forces.append(patient.force(t))
+        flags.append(int(out["status"][0]))
+        xs.append(x)
+    return np.array(forces), np.array(flags), np.array(xs)
+
+
+def holding_controller(**hold) -> HandGuidingController:
+    return HandGuidingController(
+        ControllerParams(
+            release=ReleaseParams(enabled=True),
+            hold=HoldParams(enabled=True, **hold),
+        )
+    )
+
+
+def test_a_quiet_hand_in_contact_engages_the_hold_and_the_force_rides_the_breath():
+    ctl = holding_controller()
+    patient = Patient()
+    forces, flags, _ = run(ctl, patient, 0.0, 24.0)
+    holding = (flags & int(Status.HOLDING)) != 0
+    assert holding[-1]
+    assert holding.mean() > 0.9
+    assert ctl.hold.phase == HoldPhase.HOLDING
+    late = forces[len(forces) // 2 :]
+    # a robot held still would see k · 2 · 10 mm = 24 N of swing; the hold keeps the force
+    assert late.min() > 2.0  # never lost
+    assert np.std(late) < 1.0
+    # the level before the engagement: the average of the force that the still robot saw
+    before = forces[: int(0.5 / DT)]
+    assert before.min() - 0.5 < np.mean(late) < before.max() + 0.5
+
+
+def test_a_still_robot_would_not_keep_it():
+    ctl = HandGuidingController(ControllerParams(release=ReleaseParams(enabled=True)))
+    forces, _, _ = run(ctl, Patient(), 0.0, 24.0)
+    assert np.std(forces[len(forces) // 2 :]) > 5.0
+
+
+def test_a_touch_hands_back_blended_and_the_law_has_the_robot_again():
+    ctl = holding_controller()
+    patient = Patient(amplitude_m=0.0)
+    run(ctl, patient, 0.0, 4.0)
+    assert ctl.hold.phase == HoldPhase.HOLDING
+    _, flags, xs = run(ctl, patient, 4.0, 5.0, hand_x_N=3.0)  # a push across the axis
+    back = (flags & int(Status.HANDING_BACK)) != 0
+    assert back.any()
+    assert not back[-1]
+    assert ctl.hold.ended == HoldEnd.HANDED_BACK
+    assert ctl.hold.phase == HoldPhase.OFF
+    v = np.diff(xs) / DT
+    # the law's 0.0125 · (3 - 0.95) = 26 mm/s reached, never overshot, no step above the clamp
+    assert v[-1] == pytest.approx(0.0125 * (3.0 - 0.95), rel=0.05)
+    assert np.max(np.abs(np.diff(v))) <= 1.0 * DT + 1e-9
+
+
+def test_the_contact_lost_ends_the_hold_at_rest():
+    ctl = holding_controller()
+    patient = Patient(amplitude_m=0.0)
+    run(ctl, patient, 0.0, 4.0)
+    assert ctl.hold.phase == HoldPhase.HOLDING
+    patient.surface = lambda t: 0.2  # the patient moved 10 cm away: nothing touches
+    _, flags, _ = run(ctl, patient, 4.0, 5.0)
+    assert ctl.hold.ended == HoldEnd.CONTACT_LOST
+    assert flags[-1] & int(Status.RELEASED)
+    assert not flags[-1] & int(Status.HOLDING)
+
+
+def test_hold_is_off_by_default():
+    ctl = HandGuidingController(ControllerParams(release=ReleaseParams(enabled=True)))
+    _, flags, _ = run(ctl, Patient(), 0.0, 6.0)
+    assert not np.any(flags & int(Status.HOLDING))
+
+
+def test_the_surface_filter_gain_is_a_stable_fixed_point():
+    K3 = surface_observer_gain(HoldParams(), DT)
+    assert np.all(K3 > 0.0)
+    assert K3[0] < 1.0
+    F = np.array([[1.0, DT, 0.5 * DT * DT], [0.0, 1.0, DT], [0.0, 0.0, 1.0]])
+    closed = (np.eye(3) - np.outer(K3, [1.0, 0.0, 0.0])) @ F
+    assert np.max(np.abs(np.linalg.eigvals(closed))) < 1.0
+
+
+def test_hold_params_reject_a_setpoint_cap_under_the_contact():
+    with pytest.raises(ConfigError, match=r"max_force_N"):
+        HoldParams(contact_N=5.0, max_force_N=4.0)
+
+
+def test_a_stop_flag_ends_a_hold_and_says_so():
+    """Stale probe data (a stop flag): the controller commands zero, and the hold in progress ends
+    as STOPPED, its count kept, rather than vanishing as if it had never begun."""
+    ctl = holding_controller()
+    patient = Patient(amplitude_m=0.0)
+    run(ctl, patient, 0.0, 4.0)
+    assert ctl.hold.phase == HoldPhase.HOLDING
+    stale = patient.inputs(4.0)
+    stale["probe_age"] = np.array([1.0])
+    out = ctl.step(4.0, DT, stale)
+    assert int(out["status"][0]) & int(Status.STALE_PROBE)
+    assert ctl.hold.phase == HoldPhase.OFF
+    assert ctl.hold.ended == HoldEnd.STOPPED
+    assert ctl.hold.holds == 1
