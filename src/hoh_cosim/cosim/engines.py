@@ -131,6 +131,14 @@ def _runs(
     )
 
 
+def _inline(rt: Runtime) -> tuple[Any, ...]:
+    """What the master needs to run an in-process runtime's `step` inline (the block's step, its
+    input views, its output views and the arrays copied there last); Nones for any other."""
+    if type(rt) is InProcessRuntime:
+        return rt.block.step, rt._inputs, rt._out_views, rt._written
+    return None, None, None, None
+
+
 def _slices(ports: Sequence[Any]) -> list[tuple[str, slice]]:
     out, offset = [], 0
     for port in ports:
@@ -512,7 +520,7 @@ def _run(
     cycle = min(math.lcm(*(rt.spec.every for rt in runtimes)), max(scenario.n_ticks, 1))
     plan = [
         [
-            (rt.step, rt.spec.every * dt, gather[i], rt.in_buf, runs[i])
+            (rt.step, rt.spec.every * dt, gather[i], rt.in_buf, runs[i], *_inline(rt))
             for i, rt in enumerate(runtimes)
             if phase % rt.spec.every == 0
         ]
@@ -533,13 +541,32 @@ def _run(
             while events and events[0].time_s <= t + 0.5 * dt:
                 event = events.popleft()
                 by_name[event.component].retune(event.params, event.changes)
-            for step_component, step, index, buf, copies in plan[k % cycle]:
+            for (
+                step_component,
+                step,
+                index,
+                buf,
+                copies,
+                block_step,
+                inputs,
+                views,
+                written,
+            ) in plan[k % cycle]:
                 if copies is None:
                     take(index, out=buf)
                 else:
                     for dst, src in copies:
                         dst[:] = src
-                step_component(t, step)
+                if block_step is None:
+                    step_component(t, step)
+                    continue
+                # InProcessRuntime.step, inline: a call fewer per component and tick
+                returned = block_step(t, step, inputs)
+                for i, (name, view) in enumerate(views):
+                    value = returned[name]
+                    if value is not written[i]:
+                        view[...] = value
+                        written[i] = value
             if jacobi:
                 for every, at, size in spans:
                     if (k + shift) % every == 0:
