@@ -17,9 +17,11 @@ from hoh_cosim.study.linear import (
     OMEGA,
     LoopModel,
     filter_response,
+    frd_margins,
     lag_ms,
     loop_margins,
     loop_model,
+    open_loop,
 )
 from tests.integration.test_scenarios import SCENARIOS
 
@@ -152,3 +154,22 @@ def test_loop_model_reads_the_scenario() -> None:
     # FT-150 latency 2 ms + the held packet's mean age 2 ms; CB3 one 8 ms cycle + 4 ms + 4 ms
     assert model.sensor_delay_s == pytest.approx(0.004)
     assert model.robot_delay_s == pytest.approx(0.016)
+
+
+@pytest.mark.parametrize("kind", sorted(FILTERS))
+@pytest.mark.parametrize("slope", [0.002, 0.0125, 0.2])
+def test_frd_margins_are_python_controls_to_the_bit(kind: str, slope: float) -> None:
+    """`frd_margins` skips only the stability margin of python-control's `stability_margins`: every
+    gain and phase margin and both crossovers' frequencies come out bit for bit the same, on loops
+    with one crossover, many (a large slope) or none."""
+    import control
+
+    model = dataclasses.replace(loop_model(load_scenario(SCENARIOS / "circles.yaml")), slope=slope)
+    loop = open_loop(model, filter_response(FILTERS[kind], OMEGA, signal_speed=6.0), OMEGA)
+    gm, pm, _, wpc, wgc, _ = control.stability_margins(loop, returnall=True)
+    ours = frd_margins(loop)
+    theirs = [np.asarray(v, dtype=float) for v in (gm, pm, wpc, wgc)]
+    assert theirs[0].size > 0 or slope == 0.002
+    for a, b in zip(ours, theirs, strict=True):
+        assert a.shape == b.shape
+        assert np.array_equal(a, b)

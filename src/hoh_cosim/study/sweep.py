@@ -57,6 +57,7 @@ from hoh_cosim.yamlfile import Where, read_yaml
 __all__ = [
     "MAX_RUNS",
     "Outcome",
+    "RunPool",
     "Sweep",
     "Variant",
     "check_scheduler",
@@ -200,80 +201,143 @@ def run_variants(
     """Run every variant, in `variants` order: serially in this process when `workers` is 0 and no
     scheduler is given; else on the Dask cluster at `scheduler`, or on a local cluster of `workers`
     worker processes (default: one per core), one thread each (the runs are pure Python)."""
-    bar = _Bar(label, len(variants), progress)
-    outcomes: dict[int, Outcome] = {}
-
-    def finish(i: int, outcome: Outcome) -> None:
-        outcomes[i] = outcome
-        bar.update(outcome)
-        if on_outcome is not None:
-            on_outcome(outcome)
-
-    try:
-        if scheduler is None and workers == 0:
-            for i, variant in enumerate(variants):
-                finish(i, run_variant(variant))
-        else:
-            _run_on_dask(variants, workers, scheduler, finish)
-    finally:
-        bar.close()
-    return [outcomes[i] for i in range(len(variants))]
-
-
-def _run_on_dask(
-    variants: Sequence[Variant],
-    workers: int | None,
-    scheduler: str | None,
-    finish: Callable[[int, Outcome], None],
-) -> None:
-    import logging
-
-    from distributed import Client, LocalCluster, as_completed
-
     if not variants:
-        return
-    cluster = None
-    try:
-        if scheduler is None:
-            n = workers if workers is not None else (os.cpu_count() or 1)
+        return []
+    with RunPool(
+        workers=workers,
+        scheduler=scheduler,
+        progress=progress,
+        label=label,
+        on_outcome=on_outcome,
+        expected=len(variants),
+    ) as pool:
+        pool.submit(variants)
+        return pool.results()
+
+
+class RunPool:
+    """`run_variants` in batches: runs submitted now start at once on the cluster (longest first
+    among those waiting), while the caller computes what the next batch depends on; `results()`
+    waits for every run submitted and gives their outcomes in submission order.
+
+        with RunPool(workers=2, label="report") as pool:
+            pool.submit(independent)
+            ...                      # e.g. the analysis that picks the other runs
+            pool.submit(dependent)
+            outcomes = pool.results()
+
+    Serially (`workers` 0, no scheduler) the runs go in `results()`, in order, in this process.
+    `expected`, the number of runs if known, keeps a local cluster from starting more workers than
+    runs."""
+
+    def __init__(
+        self,
+        *,
+        workers: int | None = None,
+        scheduler: str | None = None,
+        progress: bool = True,
+        label: str = "sweep",
+        on_outcome: Callable[[Outcome], None] | None = None,
+        expected: int | None = None,
+    ) -> None:
+        self.workers, self.scheduler, self.expected = workers, scheduler, expected
+        self.on_outcome = on_outcome
+        self.serial = scheduler is None and workers == 0
+        self.bar = _Bar(label, 0, progress)
+        self.variants: list[Variant] = []
+        self.futures: dict[Any, int] = {}
+        self.cluster: Any = None
+        self.client: Any = None
+
+    def __enter__(self) -> RunPool:
+        if not self.serial:
+            try:
+                self._connect()
+            except BaseException:
+                self.close()
+                raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _connect(self) -> None:
+        import logging
+
+        from distributed import Client, LocalCluster
+
+        if self.scheduler is None:
+            n = self.workers if self.workers is not None else (os.cpu_count() or 1)
             if n < 1:
                 raise ConfigError(f"--workers: expected an integer >= 0, got {n}")
-            cluster = LocalCluster(
-                n_workers=min(n, len(variants)),
+            self.cluster = LocalCluster(
+                n_workers=min(n, self.expected) if self.expected else n,
                 threads_per_worker=1,
                 processes=True,
                 host="127.0.0.1",
                 dashboard_address=":0",  # a free port: never clash with a running cluster
                 silence_logs=logging.ERROR,
             )
-            client = Client(cluster)
+            self.client = Client(self.cluster)
         else:
-            check_scheduler(scheduler)
+            check_scheduler(self.scheduler)
             try:
-                _refused(scheduler)
-                client = Client(scheduler, timeout=10)
+                _refused(self.scheduler)
+                self.client = Client(self.scheduler, timeout=10)
             except (OSError, TimeoutError, ValueError) as exc:
                 raise ConfigError(
-                    f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})"
+                    f"--scheduler {self.scheduler}: cannot reach a Dask scheduler there ({exc})"
                 ) from None
-        with client:
-            # longest first: the last runs to finish are short ones, not a long one on one worker
-            # while the others idle (a report's 272 s calibration runs among 30 s ones)
-            length = _simulated_seconds(variants)
-            futures = {
-                client.submit(run_variant, v, pure=False, priority=length[i]): i
-                for i, v in enumerate(variants)
-            }
-            for future in as_completed(futures):
-                i = futures[future]
+
+    def submit(self, variants: Sequence[Variant]) -> None:
+        """Start `variants` (on the cluster; serially, they wait for `results()`)."""
+        first = len(self.variants)
+        self.variants.extend(variants)
+        self.bar.total += len(variants)
+        if self.serial or not variants:
+            return
+        # longest first: the last runs to finish are short ones, not a long one on one worker
+        # while the others idle (a report's 272 s calibration runs among 30 s ones)
+        length = _simulated_seconds(variants)
+        for i, v in enumerate(variants):
+            future = self.client.submit(run_variant, v, pure=False, priority=length[i])
+            self.futures[future] = first + i
+
+    def results(self) -> list[Outcome]:
+        """Every submitted run's outcome, in submission order (waits for the runs)."""
+        outcomes: dict[int, Outcome] = {}
+
+        def finish(i: int, outcome: Outcome) -> None:
+            outcomes[i] = outcome
+            self.bar.update(outcome)
+            if self.on_outcome is not None:
+                self.on_outcome(outcome)
+
+        if self.serial:
+            for i, variant in enumerate(self.variants):
+                finish(i, run_variant(variant))
+        else:
+            from distributed import as_completed
+
+            for future in as_completed(list(self.futures)):
+                i = self.futures[future]
                 try:
                     outcome = future.result()
                 except Exception as exc:  # a worker died with it, or it could not be sent
-                    outcome = _failed(variants[i], exc)
+                    outcome = _failed(self.variants[i], exc)
                 finish(i, outcome)
-    finally:
-        if cluster is not None:
-            cluster.close()
+        return [outcomes[i] for i in range(len(self.variants))]
+
+    def close(self) -> None:
+        self.bar.close()
+        try:
+            if self.client is not None:
+                self.client.close()
+        finally:
+            self.client = None
+            if self.cluster is not None:
+                self.cluster.close()
+                self.cluster = None
 
 
 def _simulated_seconds(variants: Sequence[Variant]) -> list[int]:

@@ -36,7 +36,7 @@ from hoh_cosim.study.linear import (
     loop_margins,
     loop_model,
 )
-from hoh_cosim.study.sweep import Outcome, Variant, run_variants, set_option, table_rows
+from hoh_cosim.study.sweep import Outcome, RunPool, Variant, set_option, table_rows
 
 __all__ = ["FULL", "QUICK", "ReportSettings", "build_report"]
 
@@ -305,10 +305,6 @@ def build_report(
     base_q = np.asarray(circles.component_of_kind("estimator").params.hand_force_kalman.q)
     filters = _filter_settings(s, base_q)
 
-    # the linear analysis first: the stability check's runs depend on it
-    linear = _linear_analysis(circles, filters, s)
-    candidates = tuning.make_candidates(scenarios / "circles.yaml", s.tune_candidates, s.tune_seed)
-
     batch = _Batch(scenarios)
     for label, overrides in filters.items():
         for seed in s.seeds:
@@ -384,36 +380,38 @@ def build_report(
                 ),
                 duration_s=s.circles_s,
             )
-    critical = linear["default_margins"].critical_slope
-    for factor in (0.8, 1.25):
-        a = critical * factor
-        batch.add(
-            f"stability|{factor}",
-            "circles.yaml",
-            (set_option("controller.translation.slope", [a, a, a]),),
-            duration_s=s.circles_s,
+    with RunPool(workers=workers, scheduler=scheduler, progress=progress, label="report") as pool:
+        # the runs that do not depend on the linear analysis step while it is computed
+        pool.submit(list(batch.variants.values()))
+        linear = _linear_analysis(circles, filters, s)
+        candidates = tuning.make_candidates(
+            scenarios / "circles.yaml", s.tune_candidates, s.tune_seed
         )
-    tune_runs = tuning.tune_variants(
-        candidates,
-        scenarios / "static_noise.yaml",
-        scenarios / "circles.yaml",
-        s.seeds,
-        static_s=s.static_s,
-        circles_s=s.circles_s,
-    )
-    for i, (index, what, variant) in enumerate(tune_runs):
-        batch.variants[f"tune|{index}|{what}|{i}"] = dataclasses.replace(
-            variant, index=len(batch.variants), values=(("tag", f"tune {index} {what}"),)
+        first = len(batch.variants)
+        critical = linear["default_margins"].critical_slope
+        for factor in (0.8, 1.25):
+            a = critical * factor
+            batch.add(
+                f"stability|{factor}",
+                "circles.yaml",
+                (set_option("controller.translation.slope", [a, a, a]),),
+                duration_s=s.circles_s,
+            )
+        tune_runs = tuning.tune_variants(
+            candidates,
+            scenarios / "static_noise.yaml",
+            scenarios / "circles.yaml",
+            s.seeds,
+            static_s=s.static_s,
+            circles_s=s.circles_s,
         )
-
-    tags = list(batch.variants)
-    outcomes = run_variants(
-        [batch.variants[t] for t in tags],
-        workers=workers,
-        scheduler=scheduler,
-        progress=progress,
-        label="report",
-    )
+        for i, (index, what, variant) in enumerate(tune_runs):
+            batch.variants[f"tune|{index}|{what}|{i}"] = dataclasses.replace(
+                variant, index=len(batch.variants), values=(("tag", f"tune {index} {what}"),)
+            )
+        tags = list(batch.variants)
+        pool.submit([batch.variants[t] for t in tags[first:]])
+        outcomes = pool.results()
     got = dict(zip(tags, outcomes, strict=True))
     evaluations = tuning.evaluate(
         candidates,
