@@ -24,15 +24,11 @@ from tests.xdist_groups import REAL_TIME
 pytestmark = REAL_TIME
 
 
-def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
-    # the README's campaign cut to 20 runs (seeds 11 to 30), whose first faults are of every kind
-    # there is, each with up to two more of any kind; one run at a time, as the real-time tests
-    # go, beside the rest of the suite on the other core
-    out = tmp_path / "campaign"
+def _campaign(runs: int, seed: int, out) -> tuple[subprocess.CompletedProcess, dict, list[dict]]:
     done = subprocess.run(
         [
-            *(sys.executable, "-m", "hoh_cosim", "hw", "campaign", "--runs", "20", "--seed", "11"),
-            *("--out", str(out)),
+            *(sys.executable, "-m", "hoh_cosim", "hw", "campaign", "--runs", str(runs)),
+            *("--seed", str(seed), "--out", str(out)),
         ],
         capture_output=True,
         text=True,
@@ -40,12 +36,34 @@ def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
     )
     summary = json.loads((out / "summary.json").read_text())
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
-    assert summary["runs"] == 20
     assert summary["violations"] == 0, summary["failed_runs"]
+    rows = list(csv.DictReader((out / "campaign.csv").read_text().splitlines()))
+    return done, summary, rows
+
+
+def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
+    # the README's campaign cut to 20 runs (seeds 11 to 30), whose first faults are of every kind
+    # there is, each with up to two more of any kind; one run at a time, as the real-time tests
+    # go, beside the rest of the suite on the other core
+    out = tmp_path / "campaign"
+    done, summary, rows = _campaign(20, 11, out)
+    assert summary["runs"] == 20
     kinds = tuple(campaign.KINDS)
     assert {campaign.draw_faults(seed, kinds)[0].kind for seed in range(11, 31)} == set(kinds)
-    assert all(summary["kinds"][kind]["injected"] >= 1 for kind in kinds)
-    rows = list(csv.DictReader((out / "campaign.csv").read_text().splitlines()))
+    injected = {kind for r in rows for kind in r["injected"].split()}
+    # A run that this machine stopped before its faults (a stream starved for the runner's 1 s
+    # cap: seen in CI with the rest of the suite on both cores) injected nothing; it is run again
+    # alone from its seed, as the README tells a user, so that every kind is still exercised.
+    for row in rows:
+        if row["machine_stop"] == "1" and not row["injected"]:
+            for attempt in range(2):
+                where = tmp_path / f"again-{row['seed']}-{attempt}"
+                _, _, (again,) = _campaign(1, int(row["seed"]), where)
+                if again["machine_stop"] == "0":
+                    break
+            assert again["machine_stop"] == "0", f"seed {row['seed']}: {again['cause']}"
+            injected.update(again["injected"].split())
+    assert injected == set(kinds)
     assert [int(r["run"]) for r in rows] == list(range(20))
     # a run's faults are its seed's alone: what `--runs 1 --seed <seed>` would draw again
     for row in rows:
