@@ -375,6 +375,14 @@ def _num(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3g}"
 
 
+def _pct(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.1f}"
+
+
+def _mm(value: float | None) -> float | None:
+    return None if value is None else 1e3 * value
+
+
 def _clinical(args: argparse.Namespace) -> int:
     from hoh_cosim.study.clinical import ASSISTED, MODES, TASKS, run_clinical
 
@@ -393,15 +401,26 @@ def _clinical(args: argparse.Namespace) -> int:
         f"clinical: {s['operators']} operators, {s['runs']} runs in {s['wall_s']:.0f} s, "
         f"{len(s['failed_runs'])} failed"
     )
-    print(f"  {'task':6} {'mode':28} {'hand force less [%]':>28} {'jitter less [%]':>24}")
+    width = max(len(MODES[mode].label) for mode in ASSISTED)
+    print(f"  {'task':6} {'mode':{width}}  {'hand force less [%]':>26}  {'jitter less [%]':>26}")
     for task in TASKS:
         for mode in ASSISTED:
             e = s["tasks"][task][mode]
             force, jitter = e["hand_force_reduction_pct"], e["jitter_improvement_pct"]
             print(
-                f"  {task:6} {MODES[mode].label:28} "
-                f"{_num(force['mean']):>8} (smallest {_num(force['min']):>6})"
-                f"{_num(jitter['mean']):>14} (smallest {_num(jitter['min'])})"
+                f"  {task:6} {MODES[mode].label:{width}}  "
+                f"{_pct(force['mean']):>7} (smallest {_pct(force['min']):>7})  "
+                f"{_pct(jitter['mean']):>7} (smallest {_pct(jitter['min']):>7})"
+            )
+    held = s.get("hold_on_release") or {}
+    if held:
+        print("  hold-on-release, mean over operators (largest):")
+        for task, h in held.items():
+            std, losses, jump = h["contact_force_std_N"], h["contact_losses"], h["handback_jump_m"]
+            print(
+                f"  {task:6} contact force std {_num(std['mean'])} N ({_num(std['max'])}), "
+                f"contact losses {_num(losses['mean'])} ({_num(losses['max'])}), "
+                f"hand-back jump {_num(_mm(jump['mean']))} mm ({_num(_mm(jump['max']))})"
             )
     for line in s["failed_runs"][:5]:
         print(f"hoh-cosim: failed: {line}", file=sys.stderr)
