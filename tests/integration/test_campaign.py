@@ -13,6 +13,7 @@ import math
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -24,7 +25,9 @@ from tests.xdist_groups import REAL_TIME
 pytestmark = REAL_TIME
 
 
-def _campaign(runs: int, seed: int, out) -> tuple[subprocess.CompletedProcess, dict, list[dict]]:
+def _campaign(
+    runs: int, seed: int, out: Path
+) -> tuple[subprocess.CompletedProcess, dict, list[dict]]:
     done = subprocess.run(
         [
             *(sys.executable, "-m", "hoh_cosim", "hw", "campaign", "--runs", str(runs)),
@@ -52,10 +55,11 @@ def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
     assert {campaign.draw_faults(seed, kinds)[0].kind for seed in range(11, 31)} == set(kinds)
     injected = {kind for r in rows for kind in r["injected"].split()}
     # A run that this machine stopped before its faults (a stream starved for the runner's 1 s
-    # cap: seen in CI with the rest of the suite on both cores) injected nothing; it is run again
-    # alone from its seed, as the README tells a user, so that every kind is still exercised.
+    # cap: seen in CI with the rest of the suite on both cores) did not inject them all; it is run
+    # again alone from its seed, as the README tells a user, so that every kind is exercised.
     for row in rows:
-        if row["machine_stop"] == "1" and not row["injected"]:
+        drawn = {f.kind for f in campaign.draw_faults(int(row["seed"]), kinds)}
+        if row["machine_stop"] == "1" and drawn - set(row["injected"].split()):
             for attempt in range(2):
                 where = tmp_path / f"again-{row['seed']}-{attempt}"
                 _, _, (again,) = _campaign(1, int(row["seed"]), where)
