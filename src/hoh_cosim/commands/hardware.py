@@ -549,20 +549,11 @@ def _rehearsal_params(overrides: list[str]) -> tuple[Any, Any]:
         return None, None
     from hoh_cosim.control.controller import ControllerParams
     from hoh_cosim.control.estimator import EstimatorParams
-    from hoh_cosim.params import override
-    from hoh_cosim.yamlfile import parse_value
+    from hoh_cosim.hardware.config import with_overrides
 
-    params: dict[str, Any] = {"estimator": EstimatorParams(), "controller": ControllerParams()}
-    for text in overrides:
-        target, sep, value_text = text.partition("=")
-        block, _, param_path = target.partition(".")
-        if not sep or not param_path or block not in params:
-            raise ConfigError(
-                f"--set {text}: expected estimator.parameter=value or controller.parameter=value"
-            )
-        params[block] = override(
-            params[block], param_path, parse_value(text, value_text), f"--set {block}"
-        )
+    params = with_overrides(
+        {"estimator": EstimatorParams(), "controller": ControllerParams()}, overrides
+    )
     return params["estimator"], params["controller"]
 
 

@@ -60,6 +60,7 @@ __all__ = [
     "RebiasConfig",
     "RobotConfig",
     "load_config",
+    "with_overrides",
 ]
 
 _R_TS_DEFAULT = (np.pi, 0.0, 0.0)
@@ -129,6 +130,24 @@ _TOP = (
 def _section(w: Where, raw: Any, name: str, keys: tuple[str, ...]) -> dict[str, Any]:
     value = raw.get(name)
     return dict(w.mapping({} if value is None else value, keys, name))
+
+
+def with_overrides(params: dict[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
+    """`params` (the estimator's and the controller's, by block name) with `--set` overrides
+    (`estimator.x=v`, `controller.x=v`) applied in order: the rig file's, the rehearsal's and the
+    replay's `--set`."""
+    params = dict(params)
+    for text in overrides:
+        target, sep, value_text = text.partition("=")
+        block, _, param_path = target.partition(".")
+        if not sep or not param_path or block not in params:
+            raise ConfigError(
+                f"--set {text}: expected estimator.parameter=value or controller.parameter=value"
+            )
+        params[block] = override(
+            params[block], param_path, parse_value(text, value_text), f"--set {block}"
+        )
+    return params
 
 
 def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConfig:
@@ -223,17 +242,7 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConf
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     log_dir = here / w.string(raw.get("log_dir", "sessions"), "log_dir")
-    params = {"estimator": estimator, "controller": controller}
-    for text in overrides:
-        target, sep, value_text = text.partition("=")
-        block, _, param_path = target.partition(".")
-        if not sep or not param_path or block not in params:
-            raise ConfigError(
-                f"--set {text}: expected estimator.parameter=value or controller.parameter=value"
-            )
-        params[block] = override(
-            params[block], param_path, parse_value(text, value_text), f"--set {block}"
-        )
+    params = with_overrides({"estimator": estimator, "controller": controller}, overrides)
     try:
         sensors = SensorSetup.shared(params["estimator"], params["controller"])
         if probe_config is None:  # no probe sensor: no compensation, fixture or contact limits

@@ -26,9 +26,9 @@ from hoh_cosim.control.estimator import Estimator, EstimatorParams
 from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.supervisor import SessionPolicy
 from hoh_cosim.errors import ConfigError, InputFileError
+from hoh_cosim.hardware.config import with_overrides
 from hoh_cosim.hardware.session_log import FLOAT32, RESOLUTION, Session, read_session
-from hoh_cosim.params import override, with_values
-from hoh_cosim.yamlfile import parse_value
+from hoh_cosim.params import with_values
 
 __all__ = ["ReplayResult", "replay", "replay_parameters"]
 
@@ -119,17 +119,9 @@ def replay(path: str | Path, overrides: Sequence[str] = ()) -> ReplayResult:
     """Replay a session log with `overrides` (`estimator.x=v`, `controller.x=v`)."""
     session = read_session(path)
     estimator_params, controller_params, period = replay_parameters(session)
-    params: dict[str, Any] = {"estimator": estimator_params, "controller": controller_params}
-    for text in overrides:
-        target, sep, value_text = text.partition("=")
-        block, _, name = target.partition(".")
-        if not sep or not name or block not in params:
-            raise ConfigError(
-                f"--set {text}: expected estimator.parameter=value or controller.parameter=value"
-            )
-        params[block] = override(
-            params[block], name, parse_value(text, value_text), f"--set {block}"
-        )
+    params = with_overrides(
+        {"estimator": estimator_params, "controller": controller_params}, overrides
+    )
     R_TS = np.asarray(session.metadata.get("R_TS", np.eye(3)), dtype=float)
     robot = _by_cycle(session, "/robot")
     estimates, commands = _by_cycle(session, "/estimate"), _by_cycle(session, "/command")
