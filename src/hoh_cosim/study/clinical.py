@@ -32,7 +32,6 @@ one line and nothing written.
 from __future__ import annotations
 
 import csv
-import html
 import io
 import json
 import math
@@ -54,7 +53,7 @@ from hoh_cosim.study.sweep import (
     set_option,
     table_rows,
 )
-from hoh_cosim.study.verification import Section, Table
+from hoh_cosim.study.verification import Section, Table, page_html, page_markdown
 
 __all__ = [
     "FANG_2017",
@@ -525,8 +524,10 @@ def run_clinical(
             json.dumps(jsonable(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8"
         )
         title, line = _header(summary)
-        (staging / "index.html").write_text(_html(title, line, sections), encoding="utf-8")
-        (staging / "report.md").write_text(_markdown(title, line, sections), encoding="utf-8")
+        (staging / "index.html").write_text(
+            page_html(title, line, sections, _CSS), encoding="utf-8"
+        )
+        (staging / "report.md").write_text(page_markdown(title, line, sections), encoding="utf-8")
 
     replace_dir(out, fill)
     return ClinicalResult(out, summary, outcomes, sections)
@@ -1098,32 +1099,3 @@ _CSS = (
     "td,th{border:1px solid #bbb;padding:3px 6px}caption{font-weight:bold;text-align:left}"
     "img{max-width:100%}"
 )
-
-
-def _html(title: str, line: str, sections: Sequence[Section]) -> str:
-    parts = [
-        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-        f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
-        f"<p>{html.escape(line)}</p>"
-    ]
-    for sec in sections:
-        parts.append(f"<h2>{html.escape(sec.title)}</h2>")
-        parts += [f"<p>{html.escape(t)}</p>" for t in sec.text]
-        parts += [t.html() for t in sec.tables]
-        parts += [
-            f"<figure><img src='{f}' alt='{html.escape(c)}'><figcaption>{html.escape(c)}"
-            "</figcaption></figure>"
-            for f, c in sec.figures
-        ]
-    parts.append("</body></html>\n")
-    return "\n".join(parts)
-
-
-def _markdown(title: str, line: str, sections: Sequence[Section]) -> str:
-    parts = [f"# {title}\n", f"{line}\n"]
-    for sec in sections:
-        parts.append(f"## {sec.title}\n")
-        parts += [f"{t}\n" for t in sec.text]
-        parts += [t.markdown() for t in sec.tables]
-        parts += [f"![{c}]({f})\n" for f, c in sec.figures]
-    return "\n".join(parts)

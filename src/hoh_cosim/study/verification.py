@@ -448,8 +448,12 @@ def build_report(
         (staging / "summary.json").write_text(
             json.dumps(jsonable(summary), indent=2, allow_nan=False) + "\n", "utf-8"
         )
-        (staging / "index.html").write_text(_html(sections, summary), encoding="utf-8")
-        (staging / "report.md").write_text(_markdown(sections, summary), encoding="utf-8")
+        (staging / "index.html").write_text(
+            page_html(*_header(summary), sections, _CSS), encoding="utf-8"
+        )
+        (staging / "report.md").write_text(
+            page_markdown(*_header(summary), sections), encoding="utf-8"
+        )
 
     replace_dir(out, fill)
     return ReportResult(out, sections, summary, outcomes)
@@ -1215,11 +1219,13 @@ def _header(summary: dict[str, Any]) -> tuple[str, str]:
     return "hoh-cosim verification report", lines
 
 
-def _html(sections: Sequence[Section], summary: dict[str, Any]) -> str:
-    title, line = _header(summary)
+def page_html(title: str, line: str, sections: Sequence[Section], css: str) -> str:
+    """A report's `index.html`: its title, a line under it, then each section's text, tables and
+    figures (the verification report's and the clinical study's)."""
     parts = [
-        f"<!doctype html><html><head><meta charset='utf-8'><title>{title}</title>"
-        f"<style>{_CSS}</style></head><body><h1>{title}</h1><p>{html.escape(line)}</p>"
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{css}</style></head><body><h1>{html.escape(title)}</h1>"
+        f"<p>{html.escape(line)}</p>"
     ]
     for sec in sections:
         parts.append(f"<h2>{html.escape(sec.title)}</h2>")
@@ -1234,8 +1240,8 @@ def _html(sections: Sequence[Section], summary: dict[str, Any]) -> str:
     return "\n".join(parts)
 
 
-def _markdown(sections: Sequence[Section], summary: dict[str, Any]) -> str:
-    title, line = _header(summary)
+def page_markdown(title: str, line: str, sections: Sequence[Section]) -> str:
+    """The same report as `report.md`."""
     parts = [f"# {title}\n", f"{line}\n"]
     for sec in sections:
         parts.append(f"## {sec.title}\n")
