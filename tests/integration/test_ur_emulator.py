@@ -518,6 +518,24 @@ def test_the_tcp_force_is_the_hands_push_and_the_clock_is_the_worlds(still_rig):
     assert abs(timestamp - world_time) < 0.1  # the world's clock, read a moment apart
 
 
+def test_a_world_and_a_controller_the_machine_holds_back_measure_how_long(still_rig):
+    # the campaign tells a run whose emulated devices stood still (rig_stall_ms) by these
+    world, ur = still_rig
+    time.sleep(0.2)
+    for pid in (world._process.pid, ur._process.pid):
+        os.kill(pid, signal.SIGSTOP)
+    time.sleep(0.3)
+    for pid in (world._process.pid, ur._process.pid):
+        os.kill(pid, signal.SIGCONT)
+    assert wait_for(lambda: ur.said(r"^stalled \d+ ms$"), 2.0)
+    stalled = [int(text.split()[1]) for _, text in ur.events if text.startswith("stalled")]
+    assert max(stalled) >= 250
+    longest, at = world.stall()
+    assert longest >= 0.25
+    # the world time the stall began at: after the first turns, not after the time published now
+    assert 0.1 < at <= float(world._state.read()[23])
+
+
 def test_a_clients_text_message_reaches_the_controllers_log(still_rig):
     _, ur = still_rig
     with GuideClient(ur.host) as client:

@@ -630,6 +630,11 @@ def _hw_campaign(args: argparse.Namespace) -> int:
 
     def tell(run: campaign.Run) -> None:
         verdict = "ok" if not run.violations else "VIOLATION: " + "; ".join(run.violations)
+        if run.violations and run.rig_stall_s >= campaign.RIG_STALL_S:
+            verdict += (
+                f" (this machine held the emulated devices back {1e3 * run.rig_stall_s:.0f} ms "
+                "during the run)"
+            )
         faults = " ".join(f.text() for f in run.faults)
         print(f"run {run.number} (seed {run.seed}) {faults}: {run.cause or 'done'}; {verdict}")
 

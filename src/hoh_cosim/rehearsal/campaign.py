@@ -41,6 +41,13 @@ periods), the watchdog's period and `BRAKE_S` of the silence's start. The faults
 are not judged (the runner could not see them); every other invariant still is. Such runs are
 counted apart (`machine_stops`), never hidden among the faults'.
 
+The emulated devices stand for hardware of their own, so their loops run above the runner's
+priority; a machine can still hold them back (a virtual CPU the host deschedules, a kernel call
+that waits on an ordinary worker). Each run records the longest time the world's loop or the UR
+controller's stood still (`rig_stall_ms`); `rig_stalls` counts the runs where it reached
+`RIG_STALL_S`. Their violations stay violations: such a run says nothing about the runner, and is
+re-run from its seed.
+
 The run's seed is the campaign's seed plus its number, and a run depends on its seed alone: a failing
 run is re-run alone with `--runs 1 --seed <its seed>`. The first fault's kind cycles through the kinds
 with the seed (any `len(KINDS)` runs in a row start with every kind once, so every kind is injected);
@@ -95,6 +102,11 @@ STALE_PERIODS = 3.0  # LimitParams.stale_periods: a stream this many periods old
 PERIODS_S = {"ft150": 0.005, "fse103": 0.02}  # the emulated devices' sample periods
 LINK_SILENCE_S = 0.1  # RtdeRobot.silence_s: no new controller state for this long, the link is gone
 WATCHDOG_HZ = 20.0  # the rig's robot watchdog here (hoh_cosim.hardware.config's default)
+RIG_STALL_S = 0.05
+"""[s] The emulated devices stand for hardware of their own that no load here can hold back: a run in
+which the world's loop or the UR controller's stood still this long (half the runner's limit on the
+controller's silence, the robot watchdog's period) did not face the rig it claims to, and the
+summary counts it (`rig_stalls`); its violations stay violations."""
 SESSION_S = 3.5  # [s] the session after the rebias; the faults come between FIRST_S and LAST_S
 FIRST_S, LAST_S = 1.0, 2.5  # [s] after the rebias (the hand comes at 0.5 s)
 ENDED = re.compile(r"^session ended: (.*)$", re.M)
@@ -228,6 +240,8 @@ class Run:
     gaps_s: dict[str, float] = field(default_factory=dict)
     wall_s: float = 0.0
     machine_stop: bool = False  # stopped by a stream the machine starved, before any fault of ours
+    # the longest time the emulated devices (the world's loop, the UR controller's) stood still [s]
+    rig_stall_s: float = math.nan
     violations: list[str] = field(default_factory=list)
 
     def row(self) -> dict[str, object]:
@@ -253,6 +267,7 @@ class Run:
                     ("gap_ms", _ms(self.gaps_s.get(name, math.nan))),
                 )
             },
+            "rig_stall_ms": _ms(self.rig_stall_s),
             "wall_s": round(self.wall_s, 2),
             "violations": "; ".join(self.violations),
         }
@@ -514,6 +529,12 @@ def run_one(
             (directory / "controller.log").write_text(
                 "".join(f"{t:.4f} {text}\n" for t, text in ur.events)
             )
+            run.rig_stall_s = max(
+                [
+                    world.stall()[0],
+                    *(1e-3 * float(m[1]) for _, text in ur.events if (m := _STALLED.match(text))),
+                ]
+            )
             for hog in hogs:
                 hog.stop()
             monitor.done.set()
@@ -533,6 +554,9 @@ def run_one(
     _judge(run, output.read_text(), log, monitor, killed_at)
     run.wall_s = time.monotonic() - started
     return run
+
+
+_STALLED = re.compile(r"stalled (\d+) ms$")
 
 
 def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) -> None:
@@ -756,12 +780,20 @@ def summarise(runs: Sequence[Run], seed: int) -> dict:
         "runs": len(runs),
         "violations": sum(1 for r in runs if r.violations),
         "machine_stops": sum(1 for r in runs if r.machine_stop),
+        "rig_stalls": sum(1 for r in runs if r.rig_stall_s >= RIG_STALL_S),
         "seed": seed,
         "kinds": per_kind,
         "fault_to_standstill_ms": _percentiles([r.standstill_s for r in runs if r.first_kind]),
         "streams": _streams(runs),
         "failed_runs": [
-            {"run": r.number, "seed": r.seed, "violations": r.violations}
+            {
+                "run": r.number,
+                "seed": r.seed,
+                "violations": r.violations,
+                "rig_stall_ms": None
+                if math.isnan(r.rig_stall_s)
+                else round(1e3 * r.rig_stall_s, 1),
+            }
             for r in runs
             if r.violations
         ],
@@ -816,6 +848,11 @@ def table(summary: dict) -> str:
         lines.append(
             f"stopped by this machine before any fault (a stream silent for the 1 s cap, most of "
             f"it with ordinary tasks starved): {summary['machine_stops']} runs"
+        )
+    if summary["rig_stalls"]:
+        lines.append(
+            f"runs whose emulated devices this machine held back for {1e3 * RIG_STALL_S:.0f} ms "
+            f"or more (their loop's longest turn; in campaign.csv): {summary['rig_stalls']}"
         )
     for name, figures in summary["streams"].items():
         if figures["runs"]:

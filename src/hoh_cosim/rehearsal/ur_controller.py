@@ -54,7 +54,11 @@ import numpy as np
 from hoh_cosim.rehearsal import rtde_protocol as rtde
 from hoh_cosim.rehearsal.world import as_hardware, process_context
 
-__all__ = ["INJECTIONS", "UrController"]
+__all__ = ["INJECTIONS", "STALL_EVENT_S", "UrController"]
+
+STALL_EVENT_S = 0.02
+"""A cycle of the controller's loop that starts this long [s] after the one before (ten e-series
+cycles) is an event of its log, "stalled N ms": the machine held the emulated controller back."""
 
 # what the dashboard server refuses in local control (UR's e-series replies)
 _CONTROL_COMMANDS = {"power", "brake", "load", "play", "stop", "pause", "unlock", "shutdown"}
@@ -520,7 +524,7 @@ class _Emulator:
 
     def _control_loop(self) -> None:
         period = 1.0 / self.rate_hz
-        next_t = time.perf_counter()
+        next_t = last = time.perf_counter()
         while not self._stop.is_set():
             next_t += period
             delay = next_t - time.perf_counter()
@@ -528,6 +532,9 @@ class _Emulator:
                 time.sleep(delay)
             else:
                 next_t = time.perf_counter()  # late: no burst of cycles to catch up
+            gap, last = time.perf_counter() - last, time.perf_counter()
+            if gap > STALL_EVENT_S:  # the machine held the controller back: in its log
+                self._event(f"stalled {1e3 * gap:.0f} ms")
             now = time.monotonic()
             with self.lock:
                 self._program_cycle(now)

@@ -157,11 +157,17 @@ def as_hardware() -> None:
 
 
 def _world_main(
-    setup: WorldSetup, state: Any, command: Any, ready: Any, stop: Any, injections: Any
+    setup: WorldSetup,
+    state: Any,
+    command: Any,
+    ready: Any,
+    stop: Any,
+    injections: Any,
+    health: Any = None,
 ) -> None:
     as_hardware()
     try:
-        world = _World(setup, state, command, injections)
+        world = _World(setup, state, command, injections, health)
     except Exception as exc:  # report, do not hang the parent
         ready.put(("error", f"{type(exc).__name__}: {exc}"))
         return
@@ -173,7 +179,14 @@ def _world_main(
 
 
 class _World:
-    def __init__(self, setup: WorldSetup, state: Any, command: Any, injections: Any = None) -> None:
+    def __init__(
+        self,
+        setup: WorldSetup,
+        state: Any,
+        command: Any,
+        injections: Any = None,
+        health: Any = None,
+    ) -> None:
         from hoh_cosim.hardware.fse103 import FRAMINGS, encode_frame
         from hoh_cosim.hardware.ft150 import encode_sample
 
@@ -230,6 +243,8 @@ class _World:
         self.pty_name = os.ttyname(slave)
         self.faults = sorted(setup.faults, key=lambda f: f.at_s)
         self.injections = injections
+        # the loop's longest stall [s] and the world time it began at (RehearsalWorld.stall)
+        self.health = health if health is not None else [0.0, math.nan]
         self.ending: dict[str, float] = {}  # world time at which a fault of that kind ends
         self.ft_stalled = self.protective = self.program_stopped = False
         self.ft_nan = self.nan_next = False
@@ -401,9 +416,13 @@ class _World:
     def run(self, stop: Any) -> None:
         pacer = Pacer(WORLD_DT, spin_s=0.0)  # sleep only: the world catches up when late
         k = 0
-        start = time.perf_counter()
+        start = last = time.perf_counter()
         while not stop.is_set():
             pacer.wait()
+            now = time.perf_counter()
+            if now - last > self.health[0]:  # the longest time the devices stood still
+                self.health[0], self.health[1] = now - last, k * WORLD_DT
+            last = now
             # after a stall of this process, catch up: the world keeps to real time
             behind = int((time.perf_counter() - start) / WORLD_DT) - k
             for _ in range(max(1, min(behind, 50))):
@@ -500,9 +519,13 @@ class RehearsalWorld:
         self._ready = context.Queue()
         self._stop = context.Event()
         self._injections = context.Queue()
+        self._health = context.RawArray("d", [0.0, math.nan])
         self._process = context.Process(
             target=_world_main,
-            args=(setup, self.state, self.command, self._ready, self._stop, self._injections),
+            args=(
+                *(setup, self.state, self.command, self._ready, self._stop, self._injections),
+                self._health,
+            ),
             name="rehearsal-world",
             daemon=True,
         )
@@ -545,6 +568,12 @@ class RehearsalWorld:
 
     def robot(self) -> SimulatedRobot:
         return SimulatedRobot(self, 1.0 / self.setup.robot_rate_hz)
+
+    def stall(self) -> tuple[float, float]:
+        """The world loop's longest time between two of its turns so far [s] (a millisecond when
+        it keeps real time; more when the machine held the emulated devices back, so that they
+        sent nothing and the arm's state stood still) and the world time it began at [s]."""
+        return float(self._health[0]), float(self._health[1])
 
     def stop(self) -> None:
         self._stop.set()
