@@ -26,6 +26,7 @@ import rtde_control
 import rtde_receive
 
 from hoh_cosim.control.supervisor import STOP_FLAGS, Status
+from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.robot import RtdeRobot
 from hoh_cosim.hardware.session_log import read_session
 from hoh_cosim.rehearsal import rtde_protocol as rtde
@@ -534,6 +535,33 @@ def test_a_world_and_a_controller_the_machine_holds_back_measure_how_long(still_
     assert longest >= 0.25
     # the world time the stall began at: after the first turns, not after the time published now
     assert 0.1 < at <= float(world._state.read()[23])
+
+
+def _look(robot: RtdeRobot, seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        robot.state()
+        time.sleep(0.002)
+
+
+def test_the_links_silence_counts_only_while_the_loop_looks(still_rig):
+    # a frozen world: the controller streams the same time stamp, as a link whose state is stale
+    world, ur = still_rig
+    robot = RtdeRobot(ur.host, watchdog_hz=WATCHDOG_HZ)
+    robot.connect()
+    os.kill(world._process.pid, signal.SIGSTOP)
+    try:
+        for _ in range(25):  # 50 ms of looks: not yet silent for 100 ms
+            robot.state()
+            time.sleep(0.002)
+        time.sleep(0.3)  # the loop itself stalled: it saw nothing, so nothing counts
+        robot.state()
+        with pytest.raises(RunError, match=r"no new state for \d+ ms"):
+            _look(robot, 1.0)  # looking again, the silence counts and ends it
+    finally:
+        os.kill(world._process.pid, signal.SIGCONT)
+        robot.stop()
+        robot.close()
 
 
 def test_a_clients_text_message_reaches_the_controllers_log(still_rig):
