@@ -7,9 +7,11 @@ must end in a stopped robot, a message that names the cause and a complete log.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
+import socket
 import subprocess
 import sys
 import threading
@@ -270,9 +272,13 @@ def test_a_probe_silenced_by_a_starved_machine_is_not_taken_for_a_silent_device(
 
 
 def unlogged_session(
-    tmp_path: Path, setup: WorldSetup, rebias_samples: int
+    tmp_path: Path,
+    setup: WorldSetup,
+    rebias_samples: int,
+    announce: Callable[[RehearsalWorld, str], None] = lambda world, message: None,
 ) -> tuple[SessionResult, RobotState]:
-    """A 3 s session without a log against a world set up so, and the robot once stopped."""
+    """A 3 s session without a log against a world set up so, and the robot once stopped;
+    `announce(world, message)` hears what the runner says."""
     with RehearsalWorld(setup) as world:
         config = rehearsal_config(world, tmp_path, rebias_samples=rebias_samples)
         robot = world.robot()
@@ -282,9 +288,76 @@ def unlogged_session(
             FT150Stream("127.0.0.1", world.ft_port),
             FSE103Port(world.pty_name, reconnect=False),
             truth_calibration(world.truth),
+            announce=lambda message: announce(world, message),
         )
         result = runner.run(3.0)
         return result, stopped_state(robot)
+
+
+def test_a_rate_a_held_back_stream_fakes_at_the_rebias_is_measured_again(tmp_path):
+    # An FT-150 on loopback that the machine holds back as the rebias begins and then hands the
+    # backlog at ten times its rate (as a world or a reader catching up after a stall does): on
+    # receipt times the first window looks faster than the datasheet allows. The rebias says so,
+    # measures a second window, keeps it, and the session goes on.
+    from hoh_cosim.control.gravity import GravityModel
+    from hoh_cosim.hardware.ft150 import encode_sample
+
+    rebias_began = threading.Event()
+    said: list[str] = []
+    with RehearsalWorld(WorldSetup()) as world:
+        config = rehearsal_config(world, tmp_path, rebias_samples=100)
+        robot = world.robot()
+        calibration = truth_calibration(world.truth)
+        R_BS = robot.state().R_BT @ config.robot.R_TS
+        weight = GravityModel(calibration.tool, calibration.gravity_B).weight_S(R_BS)
+        sample = encode_sample(weight + np.asarray(world.truth["bias"]))
+        server = socket.create_server(("127.0.0.1", 0))
+        done = threading.Event()
+
+        def daemon() -> None:
+            client, _ = server.accept()
+            with client, contextlib.suppress(OSError):  # until the runner hangs up
+                client.sendall(sample)  # the stream is there: the runner goes on to the rebias
+                rebias_began.wait(10.0)
+                time.sleep(0.2)  # held back: nothing arrives
+                for _ in range(60):  # the backlog, at 2000 Hz
+                    client.sendall(sample)
+                    time.sleep(0.0005)
+                start, k = time.monotonic(), 0
+                while not done.is_set():  # and the device's own 200 Hz, on its own clock
+                    k += 1
+                    time.sleep(max(0.0, start + 0.005 * k - time.monotonic()))
+                    client.sendall(sample)
+
+        sender = threading.Thread(target=daemon, daemon=True)
+        sender.start()
+
+        def hear(message: str) -> None:
+            said.append(message)
+            if message == "rebias: hold still":
+                rebias_began.set()
+
+        runner = Runner(
+            config,
+            robot,
+            FT150Stream("127.0.0.1", server.getsockname()[1]),
+            FSE103Port(world.pty_name, reconnect=False),
+            calibration,
+            announce=hear,
+        )
+        try:
+            result = runner.run(1.0)
+        finally:
+            done.set()
+            sender.join(2.0)
+            server.close()
+    assert result.clean, (result.cause, said)
+    again = [m for m in said if m.endswith("; measuring again")]
+    assert len(again) == 1, said
+    found = re.match(r"rebias: FT-150 stream at \S+ measured at ([\d.]+) Hz \(receipt", again[0])
+    assert found, again
+    assert float(found[1]) > 250.0, again
+    assert 180.0 <= 1.0 / result.rebias.ft_period_s <= 220.0  # the window it kept
 
 
 def test_the_rebias_is_refused_when_someone_pushes_the_probe(tmp_path):

@@ -166,6 +166,14 @@ class SessionResult:
     rebias: Rebias | None
 
 
+REBIAS_RATE_TRIES = 3
+"""Windows the rebias measures a stream's rate in before it refuses a rate off the datasheet."""
+
+
+class RateRefusedError(RunError):
+    """A stream's rate, measured in one rebias window, is outside its datasheet's band."""
+
+
 def _measured(source: Source, samples: list[Sample], counts: list[int]) -> RateCheck:
     """The rate of the samples the rebias took (with their counts), on the device's own clock
     where every sample has its time stamp (FSE103: milliseconds, modulo 2**32), else on receipt
@@ -243,7 +251,24 @@ class Runner:
         return state
 
     def rebias(self, pacer: Any) -> Rebias:
-        """Average the sensors while the robot holds still; check against the gravity model."""
+        """Average the sensors while the robot holds still; check against the gravity model.
+
+        A stream whose rate measures outside its datasheet's band is measured again, up to
+        `REBIAS_RATE_TRIES` windows in all, each miss announced: on receipt times a machine that
+        holds a reader back for a while and then hands it the backlog at once makes a stream look
+        fast, and it seldom does so twice in a row; a device that really sends at another rate
+        is refused after the last window."""
+        for attempt in range(1, REBIAS_RATE_TRIES + 1):
+            try:
+                return self._rebias_once(pacer)
+            except RateRefusedError as exc:
+                if attempt == REBIAS_RATE_TRIES:
+                    raise RunError(f"rebias refused: {exc}") from None
+                self.announce(f"rebias: {exc}; measuring again")
+                self._event("remeasure", str(exc))
+        raise AssertionError("unreachable")
+
+    def _rebias_once(self, pacer: Any) -> Rebias:
         cfg = self.config.rebias
         _, ft_start = self.ft.mailbox.latest()
         probe_start = self.probe.mailbox.latest()[1] if self.probe is not None else 0
@@ -290,7 +315,7 @@ class Runner:
         for rate in rates:
             problem = rate.problem()
             if problem is not None:
-                raise RunError(f"rebias refused: {problem}")
+                raise RateRefusedError(problem)
         U, _, Vt = np.linalg.svd(R_BS_sum / len(ft_samples))
         R_BS = U @ Vt  # the mean orientation, a rotation again
         weight = GravityModel(self.calibration.tool, self.calibration.gravity_B).weight_S(R_BS)
