@@ -10,6 +10,7 @@ dashboard's `is in remote control`.
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import socket
@@ -574,7 +575,8 @@ def test_a_clients_text_message_reaches_the_controllers_log(still_rig):
 
 
 def test_actual_qd_follows_the_arm_under_speedl(still_rig):
-    _, ur = still_rig
+    world, ur = still_rig
+    assert math.isnan(world.last_moving())  # nothing has moved the arm yet
     control = rtde_control.RTDEControlInterface(ur.host, 500.0)
     try:
         with GuideClient(ur.host) as client:
@@ -592,6 +594,12 @@ def test_actual_qd_follows_the_arm_under_speedl(still_rig):
         control.disconnect()
     assert speed[0] == pytest.approx(0.02, abs=2e-3)
     assert max(abs(x) for x in qd) > 0.005  # joints turn for a TCP at 2 cm/s
+    # stopped, the arm comes to rest in its ramp, and the world says when, on its own clock
+    assert wait_for(lambda: float(world._state.read()[23]) > world.last_moving() + 0.2, 3.0)
+    moved_until = world.last_moving()
+    time.sleep(0.1)
+    assert world.last_moving() == moved_until
+    assert float(np.linalg.norm(world._state.read()[12:18])) <= 1e-9
 
 
 def test_every_output_of_the_guide_is_emulated_a_register_or_refused():

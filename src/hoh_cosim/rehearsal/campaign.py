@@ -291,30 +291,35 @@ STREAM_KINDS = frozenset(k for k in WORLD_KINDS if k.startswith(("ft_", "probe_"
 
 
 class _Monitor(threading.Thread):
-    """The arm's speed, sampled every 2 ms from the world's shared state, with monotonic times."""
+    """The arm's motion, as the world itself keeps it: the world time of its last moving tick
+    (`RehearsalWorld.last_moving`), put on this process's monotonic clock by the world's time
+    stamps sampled every 2 ms. A sampler at ordinary priority alone would take its own late
+    turns on a busy machine for a late standstill (seen: 426 ms after a runner_kill, the world's
+    own loop never more than 3 ms late)."""
 
     def __init__(self, world) -> None:
         super().__init__(name="campaign-monitor", daemon=True)
         self.world = world
-        self.times: list[float] = []
-        self.speeds: list[float] = []
+        self.offset_s = math.inf  # monotonic minus world time, at the sample read soonest
+        self.moving_at_end = False
+        self.last_moving_s = math.nan  # the world's, once done
         self.done = threading.Event()
 
     def run(self) -> None:
         while not self.done.is_set():
             state = self.world._state.read()
-            self.times.append(time.monotonic())
-            self.speeds.append(float(np.linalg.norm(state[12:18])))
+            self.offset_s = min(self.offset_s, time.monotonic() - float(state[23]))
+            self.moving_at_end = float(np.linalg.norm(state[12:18])) > 1e-9
             time.sleep(0.002)
+        self.last_moving_s = self.world.last_moving()
 
     def standstill_after(self, t: float) -> float:
         """When the arm came to rest for good after `t` (monotonic), NaN if it never did."""
-        times, speeds = np.asarray(self.times), np.asarray(self.speeds)
-        moving = np.flatnonzero((speeds > 1e-9) & (times >= t))
-        if moving.size == 0:
+        if self.moving_at_end:
+            return math.nan
+        if math.isnan(self.last_moving_s):
             return t
-        last = moving[-1]
-        return float(times[last + 1]) if last + 1 < times.size else math.nan
+        return max(t, self.last_moving_s + self.offset_s)
 
 
 class _Hog:

@@ -243,8 +243,9 @@ class _World:
         self.pty_name = os.ttyname(slave)
         self.faults = sorted(setup.faults, key=lambda f: f.at_s)
         self.injections = injections
-        # the loop's longest stall [s] and the world time it began at (RehearsalWorld.stall)
-        self.health = health if health is not None else [0.0, math.nan]
+        # the loop's longest stall [s] and the world time it began at (RehearsalWorld.stall), and
+        # the world time after the arm's last moving tick (RehearsalWorld.last_moving)
+        self.health = health if health is not None else [0.0, math.nan, math.nan]
         self.ending: dict[str, float] = {}  # world time at which a fault of that kind ends
         self.ft_stalled = self.protective = self.program_stopped = False
         self.ft_nan = self.nan_next = False
@@ -460,6 +461,9 @@ class _World:
                 "F_tip_B": hand["F_tip_B"],
             },
         )
+        arm = self.outputs["twist_B"]
+        if arm.dot(arm) > 1e-18:  # moving (above 1 nm/s): the campaign times standstills by it
+            self.health[2] = t + WORLD_DT
         before = self.ft.clock.delivered
         ft = self.ft.step(t, WORLD_DT, {"wrench_S_true": self.outputs["wrench_S"]})
         if self.ft.clock.delivered != before:
@@ -519,7 +523,7 @@ class RehearsalWorld:
         self._ready = context.Queue()
         self._stop = context.Event()
         self._injections = context.Queue()
-        self._health = context.RawArray("d", [0.0, math.nan])
+        self._health = context.RawArray("d", [0.0, math.nan, math.nan])
         self._process = context.Process(
             target=_world_main,
             args=(
@@ -574,6 +578,11 @@ class RehearsalWorld:
         it keeps real time; more when the machine held the emulated devices back, so that they
         sent nothing and the arm's state stood still) and the world time it began at [s]."""
         return float(self._health[0]), float(self._health[1])
+
+    def last_moving(self) -> float:
+        """The world time [s] at which the arm last moved (its speed above 1 nm/s), NaN if never:
+        kept by the world tick by tick, whoever looks and however late."""
+        return float(self._health[2])
 
     def stop(self) -> None:
         self._stop.set()
