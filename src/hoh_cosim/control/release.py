@@ -160,6 +160,12 @@ class ReleaseDetector:
             self._band_of = (deadband, self.params)  # keeps the ids valid
         return self._band_value
 
+    def _norms(self, F: Vec3, F_raw: Vec3 | None, deadband: Vec3) -> tuple[float, float | None]:
+        """n = ‖F̂‖_η and ‖F_raw‖_b (None without a raw packet); the compiled detector
+        (`hoh_cosim.control.kernels.KernelReleaseDetector`) computes both in one call."""
+        n = scaled_norm(F, deadband)
+        return n, None if F_raw is None else scaled_norm(F_raw, self._band(deadband))
+
     def step(
         self,
         t: float,
@@ -174,12 +180,11 @@ class ReleaseDetector:
         alone), `commanding` whether the law asks for motion, `F_probe` the probe contact force
         (None: no probe sensor). Returns whether the controller must hold the robot at rest."""
         p = self.params
-        n = scaled_norm(F, deadband)
+        n, b_raw = self._norms(F, F_raw, deadband)
         dt = None if self._t_prev is None else t - self._t_prev
         # ṅ = (‖F̂‖_η - ‖F̂_prev‖_η)/Δt: the trend of the force's size, not of each axis (an
         # axis's noise extrapolated over the horizon would look like a push)
         n_dot = (n - self._n_prev) / dt if dt is not None and dt > 0.0 else 0.0
-        b_raw = None if F_raw is None else scaled_norm(F_raw, self._band(deadband))
         self._t_prev, self._n_prev = t, n
 
         if self.phase.released:
