@@ -979,13 +979,16 @@ class KernelVariableAdmittance:
 # --- release detection (release.ReleaseDetector) ------------------------------------------------
 
 
-_RELEASE_NORMS = types.UniTuple(types.float64, 2)(_IN, _IN, _IN, _IN)
+_RELEASE_NORMS = types.UniTuple(types.float64, 3)(_IN, _IN, _IN, _IN)
 
 
 @njit(cache=True, nogil=True)
 def _release_norms(F, eta, F_raw, band):  # pragma: no cover - compiled
-    """‖F ⊘ η‖ and ‖F_raw ⊘ b‖ (release.scaled_norm, twice)."""
-    return _scaled_norm_at(F, eta), _scaled_norm_at(F_raw, band)
+    """‖F ⊘ η‖, ‖F_raw ⊘ b‖ and ‖(F - F_raw) ⊘ b‖ (release.scaled_norm, three times)."""
+    gap = np.empty(3)
+    for i in range(3):
+        gap[i] = F[i] - F_raw[i]
+    return _scaled_norm_at(F, eta), _scaled_norm_at(F_raw, band), _scaled_norm_at(gap, band)
 
 
 class KernelReleaseDetector(ReleaseDetector):
@@ -995,9 +998,11 @@ class KernelReleaseDetector(ReleaseDetector):
         warm_up_laws()
         super().__init__(params)
 
-    def _norms(self, F: Vec3, F_raw: Vec3 | None, deadband: Vec3) -> tuple[float, float | None]:
+    def _norms(
+        self, F: Vec3, F_raw: Vec3 | None, deadband: Vec3
+    ) -> tuple[float, float | None, float | None]:
         if F_raw is None:
-            return _release_norms(F, deadband, F, deadband)[0], None
+            return _release_norms(F, deadband, F, deadband)[0], None, None
         return _release_norms(F, deadband, F_raw, self._band(deadband))
 
 
