@@ -4,6 +4,7 @@ kinematics (pinocchio) and the plant, within 1e-12 relative on varied and record
 from __future__ import annotations
 
 import copy
+import dataclasses
 import importlib
 import io
 import math
@@ -14,16 +15,23 @@ import numpy as np
 import pytest
 
 from hoh_cosim.control import kernels
+from hoh_cosim.control.admittance import TRANSLATION_GAINS, AdmittanceGains
+from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
 from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.gravity import ToolParams
 from hoh_cosim.control.kalman import KalmanBank, KalmanParams
 from hoh_cosim.control.kernels import KernelKalmanBank, kernels_enabled, use_kernels
+from hoh_cosim.control.passivity import PassivityParams
 from hoh_cosim.control.probe_correction import ProbeCorrectionParams
+from hoh_cosim.control.release import ReleaseParams
+from hoh_cosim.control.supervisor import Status
+from hoh_cosim.control.variable_admittance import VariableAdmittance, VariableAdmittanceParams
 from hoh_cosim.errors import ConfigError
 from plant_models.kernels import KINEMATICS_LAYOUT, KernelUR5
 from plant_models.plant import Plant, PlantParams
 from plant_models.tool import CableDrag, ToolModel
+from tests.estimates import controller_inputs
 from tests.streams import SensorStream
 
 REL = 1e-12
@@ -140,6 +148,7 @@ CONFIGURATIONS = {
     },
     "butterworth": {"filter": "butterworth"},
     "one_euro": {"filter": "one_euro"},
+    "lead_lowpass": {"filter": "lead_lowpass"},
     "given_bias": {
         "ft_rebias_packets": 0,
         "probe_rebias_packets": 0,
@@ -290,7 +299,11 @@ def test_warm_up_is_idempotent():
     kernels.warm_up("kalman")
     kernels.warm_up()
     kernels.warm_up()
-    assert kernels._warm == {"estimator", "one_euro", "butterworth"}
+    assert kernels._warm == {"estimator", "one_euro", "butterworth", "lead_lowpass", "laws"}
+    # each of the controller's kernels has its one version, and compiles no other
+    for dispatcher in (kernels._variable_law, kernels._release_norms, kernels._passivity):
+        assert len(dispatcher.signatures) == 1
+        assert not dispatcher._can_compile
 
 
 def test_the_arm_cycles_small_solvers_match_lapack():
@@ -315,3 +328,145 @@ def test_the_arm_cycles_small_solvers_match_lapack():
         worst_solve = max(worst_solve, error / (s[0] / s[-1]))  # relative to the condition
     assert worst_sigma < REL
     assert worst_solve < REL
+
+
+# --- the controller's new laws (variable law, release detection, passivity) ---------------------
+
+
+def _guiding(k: int, dt: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """A hand that pushes in bursts and lets go (a step to nothing in the raw packet, the estimate
+    falling after it), turns the probe, a contact now and then, and a tip that shakes at 2 Hz in
+    the second half (the oscillation watch halves the slope)."""
+    t = k * dt
+    phase = t % 1.6
+    pushing = phase < 1.2
+    F = np.array([6.0 * math.cos(0.7 * t), 4.0 * math.sin(0.9 * t), 1.5 * math.sin(0.3 * t)])
+    if not pushing:
+        F = F * math.exp(-(phase - 1.2) / 0.03)
+    raw = (F if pushing else np.zeros(3)) + rng.normal(0.0, 0.2, 3)
+    shake = 0.004 * math.sin(2 * math.pi * 2.0 * t) if t > 3.0 else 0.0
+    return controller_inputs(
+        F_hand_B=F,
+        F_hand_meas_B=raw,
+        tau_hand_B=[0.3 * math.sin(t), -0.2, 0.15 * math.cos(2 * t)],
+        F_probe_B=[0.0, 0.0, 2.0 if 2.0 < t < 2.5 else 0.0],
+        p_BT_B=[0.3 + 0.02 * math.sin(0.5 * t) + shake, shake, 0.3],
+    )
+
+
+def _read_only_strided(x: np.ndarray) -> np.ndarray:
+    spread = np.zeros(2 * x.size)
+    spread[::2] = x
+    view = spread[::2]
+    view.flags.writeable = False
+    return view
+
+
+_NEW_LAWS = ControllerParams(
+    translation=AdmittanceGains(law="variable"),
+    release=ReleaseParams(enabled=True),
+    passivity=PassivityParams(enabled=True, tank_max_J=2e-3),
+)
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        _NEW_LAWS,
+        # the rotation by another law: the variable law's call leaves ω to apply_law
+        ControllerParams(
+            translation=AdmittanceGains(law="variable"),
+            rotation=AdmittanceGains(law="sigmoid"),
+            variable=VariableAdmittanceParams(intent_gain=0.3, oscillation_quiet_s=0.5),
+            release=ReleaseParams(enabled=True, horizon_s=0.1),
+            passivity=PassivityParams(enabled=True, tank_max_J=1e-3),
+        ),
+    ],
+    ids=["new_laws", "sigmoid_rotation"],
+)
+@pytest.mark.parametrize("dt", [2e-3, 8e-3])
+def test_controller_with_the_new_laws_matches_the_pure_controller(params, dt):
+    """Both paths on the same estimates: releases, the watch's halvings, retuning, copies (an
+    FMU's state) that carry on, and a reset; every output of every tick within 1e-12."""
+    pure, compiled = _pure_and_compiled(lambda: HandGuidingController(params))
+    assert type(compiled._variable).__name__ == "KernelVariableAdmittance"
+    assert type(compiled._release).__name__ == "KernelReleaseDetector"
+    assert type(compiled._passivity).__name__ == "KernelPassivityController"
+    assert type(pure._variable) is VariableAdmittance
+    rng = np.random.default_rng(3)
+    agree = Agreement()
+    n = round(8.0 / dt)
+    flags = 0
+    stability = 1.0
+    for k in range(n):
+        if k == n // 4:
+            pure, compiled = pickle.loads(pickle.dumps(pure)), pickle.loads(pickle.dumps(compiled))
+        if k == n // 2:
+            pure, compiled = copy.deepcopy(pure), copy.deepcopy(compiled)
+            tuned = dataclasses.replace(
+                params,
+                translation=dataclasses.replace(
+                    params.translation, slope=[0.0145] * 3, deadband=[0.45, 0.45, 0.25]
+                ),
+            )
+            pure.retune(tuned)
+            compiled.retune(tuned)
+        if k == 7 * n // 8:
+            pure.reset()
+            compiled.reset()
+        inputs = _guiding(k, dt, rng)
+        if k % 3 == 0:  # as an engine may hand them over: read-only, strided
+            inputs = {name: _read_only_strided(x) for name, x in inputs.items()}
+        a, b = pure.step(k * dt, dt, inputs), compiled.step(k * dt, dt, inputs)
+        for name in a:
+            agree.add(name, a[name], b[name])
+        for name in ("factor", "stability", "swings", "oscillation_m_s"):
+            agree.add(name, getattr(pure._variable, name), getattr(compiled._variable, name))
+        agree.add("energy", pure._passivity.energy_J, compiled._passivity.energy_J)
+        assert pure.release.phase == compiled.release.phase
+        flags |= int(a["status"][0])
+        stability = min(stability, pure._variable.stability)
+    name, worst = agree.worst()
+    assert worst < REL, f"{name}: {worst:.3g}"
+    # the run did what it is meant to exercise
+    assert flags & int(Status.RELEASED)
+    assert flags & int(Status.BRAKING)
+    assert flags & int(Status.PASSIVITY)
+    assert stability <= 0.5
+    assert agree.scale["twist_law_B"] > 0.05
+
+
+def test_the_variable_laws_step_matches_the_pure_law(rng):
+    """`step` (slope and deadband given per call, with and without the tip's position)."""
+    pure, compiled = _pure_and_compiled(kernels.variable_law)
+    assert type(compiled) is kernels.KernelVariableAdmittance
+    agree = Agreement()
+    slope, eta = TRANSLATION_GAINS.slope, TRANSLATION_GAINS.deadband
+    for k in range(500):
+        F = rng.normal(scale=4.0, size=3)
+        p_B = None if k % 7 == 0 else np.array([0.01 * math.sin(12 * k * 0.008), 0.0, 0.3])
+        agree.add(
+            "v",
+            pure.step(k * 0.008, F, slope, eta, p_B),
+            compiled.step(k * 0.008, F, slope, eta, p_B),
+        )
+    assert agree.worst()[1] < REL
+
+
+def test_a_wrong_law_kernel_would_be_caught():
+    """A compiled variable law whose deadband on x is off by one part in 1e9 is told apart from
+    the pure one."""
+    pure, compiled = _pure_and_compiled(lambda: HandGuidingController(_NEW_LAWS))
+    compiled.step(0.0, 8e-3, controller_inputs())  # the gains are set at the first step
+    compiled._variable.constants[kernels._V_GAINS + 3] *= 1.0 + 1e-9
+    pure.step(0.0, 8e-3, controller_inputs())
+    rng = np.random.default_rng(3)
+    agree = Agreement()
+    for k in range(1, 500):
+        inputs = _guiding(k, 8e-3, rng)
+        agree.add(
+            "twist_B",
+            pure.step(k * 8e-3, 8e-3, inputs)["twist_B"],
+            compiled.step(k * 8e-3, 8e-3, inputs)["twist_B"],
+        )
+    assert agree.worst()[1] > 100 * REL

@@ -86,6 +86,42 @@ def test_no_release_without_both_signs(fall, raw, why):
     assert all(not Status(int(o["status"][0])) & Status.RELEASED for o in outs), why
 
 
+def _steady_then(det: ReleaseDetector, F_after: float, raw_after: float, t: float = 0.0) -> bool:
+    """5 N on x with its packet for 0.4 s, then one tick with the estimate at `F_after` and the
+    packet at `raw_after`: whether the detector brakes at that tick."""
+    for _ in range(50):
+        det.step(t, np.array([5.0, 0, 0]), np.array([5.0, 0, 0]), ETA, True)
+        t += DT
+    return det.step(t, np.array([F_after, 0, 0]), np.array([raw_after, 0, 0]), ETA, True)
+
+
+def test_the_first_packet_inside_decides_when_it_is_far_below_the_estimate():
+    """One controller period after the first packet of a release the filtered estimate has fallen
+    by 6 % only (lead_lowpass), too little for the horizon; the packet, four noise bands below it,
+    decides. Without the gap the same tick waits."""
+    assert _steady_then(ReleaseDetector(ReleaseParams(enabled=True)), 4.7, 0.3)
+    assert not _steady_then(ReleaseDetector(ReleaseParams(enabled=True, gap_bands=100.0)), 4.7, 0.3)
+    # the gap needs the fall: a packet inside while the estimate holds still is no release
+    assert not _steady_then(ReleaseDetector(ReleaseParams(enabled=True)), 5.0, 0.3)
+    # and a light push released is left to the horizon (its packet is not three bands below)
+    det = ReleaseDetector(ReleaseParams(enabled=True))
+    t = 0.0
+    for _ in range(50):
+        det.step(t, np.array([3.0, 0, 0]), np.array([3.0, 0, 0]), ETA, True)
+        t += DT
+    assert not det.step(t, np.array([2.8, 0, 0]), np.array([0.0, 0, 0]), ETA, True)
+
+
+def test_no_release_from_the_noise_of_a_steady_push(rng):
+    """A steady 4 N push whose packets carry the FT-150's noise (σ 0.3 N, the estimate's own
+    jitter 0.1 N): the gap never passes for a release."""
+    det = ReleaseDetector(ReleaseParams(enabled=True))
+    for k in range(5000):
+        F = np.array([4.0, 0.0, 0.0]) + rng.normal(0.0, 0.1, 3)
+        raw = np.array([4.0, 0.0, 0.0]) + rng.normal(0.0, 0.3, 3)
+        assert not det.step(k * DT, F, raw, ETA, True)
+
+
 def test_the_undershoot_after_a_release_does_not_move_the_robot():
     det = ReleaseDetector(ReleaseParams(enabled=True))
     t = 0.0

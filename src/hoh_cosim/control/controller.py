@@ -50,7 +50,8 @@ from hoh_cosim.control.admittance import (
 )
 from hoh_cosim.control.block import TWIST_UNITS, Port
 from hoh_cosim.control.hold import ContactHold, HoldEnd, HoldParams, HoldPhase
-from hoh_cosim.control.passivity import PassivityController, PassivityParams
+from hoh_cosim.control.kernels import passivity_controller, release_detector, variable_law
+from hoh_cosim.control.passivity import PassivityParams
 from hoh_cosim.control.release import ReleaseDetector, ReleaseParams, ReleasePhase
 from hoh_cosim.control.supervisor import (
     LATCHED_FLAGS,
@@ -60,7 +61,7 @@ from hoh_cosim.control.supervisor import (
     check_inputs,
     limit_command,
 )
-from hoh_cosim.control.variable_admittance import VariableAdmittance, VariableAdmittanceParams
+from hoh_cosim.control.variable_admittance import VariableAdmittanceParams
 from hoh_cosim.control.vectors import Vec, Vec3, as_scalar, as_unit_vector, frozen
 from hoh_cosim.errors import ConfigError
 
@@ -219,9 +220,10 @@ class HandGuidingController:
         self._bits = 0
         self._v_prev = np.zeros(3)
         self._w_prev = np.zeros(3)
-        self._release = ReleaseDetector(self.params.release)
-        self._variable = VariableAdmittance(self.params.variable)
-        self._passivity = PassivityController(self.params.passivity)
+        # compiled (hoh_cosim.control.kernels) unless HOH_COSIM_KERNELS=pure
+        self._release = release_detector(self.params.release)
+        self._variable = variable_law(self.params.variable)
+        self._passivity = passivity_controller(self.params.passivity)
         self._hold = ContactHold(self.params.hold)
 
     @property
@@ -286,13 +288,14 @@ class HandGuidingController:
             v, w = twist_law[:3], twist_law[3:]
         else:
             if p.translation.law == "variable":
-                v = self._variable.step(
-                    t, F, p.translation.slope, p.translation.deadband, inputs["p_BT_B"]
+                twist_law = self._variable.step_twist(
+                    t, F, tau, p.translation, p.rotation, inputs["p_BT_B"]
                 )
+                v, w = twist_law[:3], twist_law[3:]
             else:
                 v = apply_law(F, p.translation)
-            w = apply_law(tau, p.rotation)
-            twist_law = np.concatenate([v, w])
+                w = apply_law(tau, p.rotation)
+                twist_law = np.concatenate([v, w])
 
         hold = self._hold
         holding = hold.active
@@ -355,11 +358,11 @@ class HandGuidingController:
                     status |= _RELEASED
 
         if p.passivity.enabled:
-            dt_po = self._passivity.observe(t, F, inputs["p_BT_B"])
-            if not braking and not holding:
-                v, acted = self._passivity.control(v, F, dt_po)
-                if acted:
-                    status |= _PASSIVITY
+            v, acted = self._passivity.step(
+                t, F, inputs["p_BT_B"], v, control=not braking and not holding
+            )
+            if acted:
+                status |= _PASSIVITY
 
         if p.use_probe and p.virtual_fixture and not holding:
             up = p.fixture_up_B

@@ -5,15 +5,23 @@ The estimator's tick on a 1 kHz loop is a few hundred floating-point operations 
 filters, eq. 9, a Joseph-form correction when a packet arrived, the consistency check across the
 probe's axis and the turn of four vectors into the base frame). Each numpy call costs 0.2-0.3 µs of
 dispatch whatever its size, so the tick is dispatch, not arithmetic. One compiled call per tick does
-the whole of that arithmetic over the block's own state arrays.
+the whole of that arithmetic over the block's own state arrays. The controller's laws past the seed
+(issue 22: the variable law with its oscillation watch, the release detector's norms, the
+passivity observer and controller) are the same kind of arithmetic on 3-vectors, one compiled call
+each per controller tick; the filter without a gain peak (`lead_lowpass`) is a bank like the
+baselines'.
 
 Two implementations, one behaviour:
 - the pure one (`hoh_cosim.control.kalman.KalmanBank`, `probe_correction.ContactConsistency`, the
-  baseline filters of `baselines.py`, the estimator's numpy code) stays the reference: readable,
-  checked against filterpy, scipy and the 1€ filter's reference implementation;
+  baseline filters of `baselines.py`, `filters.LeadLowpassFilter`, the estimator's numpy code,
+  `variable_admittance.VariableAdmittance`, `release.ReleaseDetector`,
+  `passivity.PassivityController`) stays the reference: readable, checked against filterpy, scipy
+  and the 1€ filter's reference implementation;
 - the compiled one (`KernelKalmanBank`, `KernelConsistency`, `KernelButterworthBank`,
-  `KernelOneEuroBank` below) is the default everywhere the estimator runs: in-process, inside the
-  FMUs (they run in the host's Python), in the hardware runner and in replay. It computes the same
+  `KernelOneEuroBank`, `KernelLeadLowpassBank`, `KernelVariableAdmittance`,
+  `KernelReleaseDetector`, `KernelPassivityController` below) is the default everywhere the
+  estimator and the controller run: in-process, inside the FMUs (they run in the host's Python), in
+  the hardware runner and in replay. It computes the same
   formulas, the Kalman bank's in another order (no BLAS, which fuses multiply-adds, and one
   covariance prediction per tick instead of owed ones), so it agrees with the pure path to
   rounding: within 1e-12 relative, tested on recorded inputs, not to the bit.
@@ -33,12 +41,22 @@ import contextlib
 import math
 import os
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit, types
 
+from hoh_cosim.control.admittance import AdmittanceGains, apply_law
 from hoh_cosim.control.baselines import ButterworthFilter, OneEuroFilter
+from hoh_cosim.control.filters import LeadLowpassFilter
 from hoh_cosim.control.kalman import KalmanParams, axis_transition, process_noise
+from hoh_cosim.control.passivity import PassivityController, PassivityParams
+from hoh_cosim.control.release import ReleaseDetector, ReleaseParams
+from hoh_cosim.control.variable_admittance import (
+    _SWING_WINDOW_S,
+    VariableAdmittance,
+    VariableAdmittanceParams,
+)
 from hoh_cosim.control.vectors import Vec, Vec3
 from hoh_cosim.errors import ConfigError
 
@@ -47,12 +65,20 @@ __all__ = [
     "KernelButterworthBank",
     "KernelConsistency",
     "KernelKalmanBank",
+    "KernelLeadLowpassBank",
     "KernelOneEuroBank",
+    "KernelPassivityController",
+    "KernelReleaseDetector",
+    "KernelVariableAdmittance",
     "compiled_bank",
     "estimator_tick",
     "kernels_enabled",
+    "passivity_controller",
+    "release_detector",
     "use_kernels",
+    "variable_law",
     "warm_up",
+    "warm_up_laws",
 ]
 
 KERNEL_MODES: tuple[str, ...] = ("compiled", "pure")
@@ -547,14 +573,102 @@ def compiled_bank(filters: Sequence[object]) -> KernelButterworthBank | KernelOn
         return KernelButterworthBank(filters)  # type: ignore[arg-type]
     if filters and all(type(f) is OneEuroFilter and f.size == 3 for f in filters):
         return KernelOneEuroBank(filters)  # type: ignore[arg-type]
+    if filters and all(type(f) is LeadLowpassFilter and f.size == 3 for f in filters):
+        return KernelLeadLowpassBank(filters)  # type: ignore[arg-type]
     return None
+
+
+# --- the passivity observer and controller (passivity.PassivityController) ---------------------
+#
+# state: E, t_prev, has t_prev, p_prev (3), the energy dissipated, E_max
+
+_P_E, _P_T, _P_HAS_T, _P_P, _P_DISSIPATED, _P_MAX = 0, 1, 2, 3, 6, 7
+_PASSIVITY = types.float64(
+    types.float64[::1], types.float64, _IN, _IN, _IN, types.boolean, types.float64[::1]
+)
+
+
+@njit(cache=True, nogil=True)
+def _passivity(S, t, F, p_B, v_c, control, out):  # pragma: no cover - compiled
+    """PassivityController.step: the PO, E ← min(E_max, E + F̂ · (p - p_prev)); then, if
+    `control` and Δt > 0, the PC: P = F̂ · v_c ; if E + P Δt < 0 (and F̂ ≠ 0):
+    out = v_c + β F̂,  β = -(E + P Δt) / (Δt ‖F̂‖²), and 1 is returned (else 0, out untouched)."""
+    dt = 0.0
+    if S[_P_HAS_T] != 0.0 and t > S[_P_T]:
+        dt = t - S[_P_T]
+        work = (
+            F[0] * (p_B[0] - S[_P_P])
+            + F[1] * (p_B[1] - S[_P_P + 1])
+            + F[2] * (p_B[2] - S[_P_P + 2])
+        )
+        S[_P_E] = min(S[_P_MAX], S[_P_E] + work)
+    S[_P_T], S[_P_HAS_T] = t, 1.0
+    for i in range(3):
+        S[_P_P + i] = p_B[i]
+    if not control or dt <= 0.0:
+        return 0.0
+    deficit = S[_P_E] + (F[0] * v_c[0] + F[1] * v_c[1] + F[2] * v_c[2]) * dt
+    FF = F[0] * F[0] + F[1] * F[1] + F[2] * F[2]
+    if deficit >= 0.0 or FF == 0.0:
+        return 0.0
+    beta = -deficit / (dt * FF)
+    S[_P_DISSIPATED] += -deficit
+    for i in range(3):
+        out[i] = v_c[i] + beta * F[i]
+    return 1.0
+
+
+class KernelPassivityController:
+    """`PassivityController`, compiled: the same parameters, `energy_J`, `dissipated_J`, `reset`
+    and `step` (the PO and the PC in one call), the state in one array."""
+
+    def __init__(self, params: PassivityParams | None = None) -> None:
+        warm_up_laws()
+        self.state = np.zeros(8)
+        self.params = params or PassivityParams()
+        self.reset()
+
+    @property
+    def params(self) -> PassivityParams:
+        return self._params
+
+    @params.setter
+    def params(self, params: PassivityParams) -> None:
+        self._params = params
+        self.state[_P_MAX] = params.tank_max_J
+
+    def reset(self) -> None:
+        S = self.state
+        S[:_P_MAX] = 0.0
+        S[_P_E] = self.params.tank_max_J  # the tank starts full
+
+    energy_J = property(lambda self: float(self.state[_P_E]), doc="E, the tank's content")
+    dissipated_J = property(
+        lambda self: float(self.state[_P_DISSIPATED]), doc="what the PC dissipated"
+    )
+
+    def step(self, t: float, F: Vec3, p_B: Vec3, v_c: Vec3, control: bool) -> tuple[Vec3, bool]:
+        out = np.empty(3)
+        if _passivity(self.state, t, F, p_B, v_c, control, out) != 0.0:
+            return out, True
+        return v_c, False
+
+
+def _load(dispatcher: Any, signature: Any) -> None:
+    """Compile `dispatcher` for one signature (or load it from the cache) and let it compile no
+    other: every caller's arguments convert to that one, so that no call compiles a new version
+    in a running loop. At the first use instead of at import, which would cost every process
+    that imports this module the load (0.3-0.5 s a function here)."""
+    if not dispatcher.signatures:
+        dispatcher.compile(signature)
+        dispatcher.disable_compile()
 
 
 _warm: set[str] = set()
 """What `warm_up` has loaded in this process: "estimator" (the Kalman bank, the consistency check,
 the fused tick) and the baseline filters' banks by filter kind."""
 
-_BASELINES = ("one_euro", "butterworth")
+_BASELINES = ("one_euro", "butterworth", "lead_lowpass")
 
 
 def warm_up(filter: str | None = None) -> None:
@@ -564,6 +678,8 @@ def warm_up(filter: str | None = None) -> None:
     Only the filter in use is loaded: the Butterworth bank's warm-up needs scipy.signal, most of a
     second of every runner's start for a filter the rig may not use."""
     wanted = {"estimator", *(b for b in _BASELINES if filter in (None, b))}
+    if filter is None:
+        warm_up_laws()
     if wanted <= _warm:
         return
     from hoh_cosim.control.baselines import ButterworthParams, OneEuroParams
@@ -583,8 +699,338 @@ def warm_up(filter: str | None = None) -> None:
         for _ in range(2):
             euro.step_bank(1e-3, (np.zeros(3), None, np.zeros(3)))
         _warm.add("one_euro")
+    if "lead_lowpass" in wanted - _warm:
+        from hoh_cosim.control.filters import LeadLowpassParams
+
+        bank = KernelLeadLowpassBank([LeadLowpassFilter(LeadLowpassParams(), 0.005)] * 3)
+        bank.step_bank(1e-3, (np.zeros(3), None, np.zeros(3)))
+        _warm.add("lead_lowpass")
     if "butterworth" in wanted - _warm:
         KernelButterworthBank([ButterworthFilter(ButterworthParams())] * 3).step_bank(
             1e-3, (np.zeros(3), None, None)
         )
         _warm.add("butterworth")
+
+
+# --- the filter without a gain peak (filters.LeadLowpassFilter) ---------------------------------
+
+
+@njit(cache=True, nogil=True)
+def _lead_lowpass(X, U, Y, started, C, z, on, out):  # pragma: no cover - compiled
+    """Every channel's `LeadLowpassFilter` step (3 axes a channel, C[channel] = (b0, b1, a1, c0,
+    c1, d1)): on a packet (on[channel] = 1) the first sets x₋ = u₋ = y = z (its steady state),
+    then u = b0 x + b1 x₋ - a1 u₋ ;  y = c0 u + c1 u₋ - d1 y₋ ;  x₋ = x ;  u₋ = u.
+    y (held between packets) into `out`."""
+    for ch in range(started.shape[0]):
+        if on[ch] == 0.0:
+            continue
+        b0, b1, a1, c0, c1, d1 = C[ch, 0], C[ch, 1], C[ch, 2], C[ch, 3], C[ch, 4], C[ch, 5]
+        if started[ch] == 0.0:
+            for i in range(3 * ch, 3 * ch + 3):
+                X[i] = U[i] = Y[i] = z[i]
+            started[ch] = 1.0
+        for i in range(3 * ch, 3 * ch + 3):
+            x = z[i]
+            u = b0 * x + b1 * X[i] - a1 * U[i]
+            Y[i] = c0 * u + c1 * U[i] - d1 * Y[i]
+            X[i], U[i] = x, u
+    for i in range(Y.shape[0]):
+        out[i] = Y[i]
+
+
+class KernelLeadLowpassBank:
+    """Three-axis `LeadLowpassFilter`s, one per channel with its own packet period, compiled as
+    one bank: the same sections, the same steady start at each channel's first packet."""
+
+    def __init__(self, filters: Sequence[LeadLowpassFilter]) -> None:
+        self.filters = tuple(filters)
+        self._c = np.array(
+            [[f._b0, f._b1, f._a1, f._c0, f._c1, f._d1] for f in self.filters], dtype=np.float64
+        )
+        n = len(self.filters)
+        self._z = np.zeros(3 * n)
+        self._on = np.zeros(n)
+        self.reset()
+
+    def reset(self) -> None:
+        n = len(self.filters)
+        self._x, self._u, self._y = np.zeros(3 * n), np.zeros(3 * n), np.zeros(3 * n)
+        self._started = np.zeros(n)
+
+    def step_bank(self, dt: float, measurements: Sequence[Vec | None]) -> Vec:
+        on = self._on
+        for c, z in enumerate(measurements):
+            if z is None:
+                on[c] = 0.0
+            else:
+                on[c] = 1.0
+                self._z[3 * c : 3 * c + 3] = z
+        out = np.empty(self._y.size)
+        _lead_lowpass(self._x, self._u, self._y, self._started, self._c, self._z, on, out)
+        return out
+
+
+# --- the variable law (variable_admittance.VariableAdmittance) ----------------------------------
+#
+# state:     t_prev, has t_prev, e_prev, g, h, c, the watch's clock, t of the last halving, has
+#            one, margined, σ, has p_prev | p_prev (3) | v_prev (3) | u1 (3) | u (3) | s (3)
+# constants: k, ė_ref, g_min, g_max, f_o, T_w, σ_o, watch on, T_q, ρ, h_min, c_o |
+#            α, η of the translation (3 + 3) | α, η of the rotation (3 + 3)
+
+_V_T, _V_HAS_T, _V_E, _V_G, _V_H, _V_C, _V_CLOCK, _V_HALVED, _V_HAS_HALVED = range(9)
+_V_MARGINED, _V_SIGMA, _V_HAS_P, _V_P, _V_V, _V_U1, _V_U, _V_S = 9, 10, 11, 12, 15, 18, 21, 24
+_V_STATE = 27
+_V_GAINS = 12  # where the gains start in the constants
+_V_CONSTANTS = _V_GAINS + 12
+_VAR_WATCH, _VAR_ROTATION = 1, 2  # `_variable_law`'s code
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _scaled_norm_at(F, eta):  # pragma: no cover - compiled
+    """release.scaled_norm: ‖F ⊘ η‖ over the axes with η > 0."""
+    total = 0.0
+    for i in range(3):
+        if eta[i] > 0.0:
+            total += (F[i] / eta[i]) ** 2
+    return math.sqrt(total)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _eq10_at(F, slope_scale, slope, eta, out, at):  # pragma: no cover - compiled
+    """admittance.deadband_linear with the slope (s α): out[at + i] = sgn Fᵢ (s αᵢ) max(|Fᵢ| - ηᵢ, 0)"""
+    for i in range(3):
+        excess = abs(F[i]) - eta[i]
+        if excess < 0.0:
+            excess = 0.0
+        out[at + i] = (np.sign(F[i]) * (slope_scale * slope[i])) * excess
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _oscillation_watch(S, C, dt, p_B):  # pragma: no cover - compiled
+    """VariableAdmittance._watch: the tip's velocity high-passed twice, its power over T_w, the
+    swings, and the halvings of h (variable_admittance's module docstring)."""
+    if S[_V_HAS_P] != 0.0:
+        tau = 1.0 / (2.0 * math.pi * C[4])
+        a = tau / (tau + dt)
+        power = 0.0
+        for i in range(3):
+            v = (p_B[i] - S[_V_P + i]) / dt
+            # first-order high-pass twice: u ← a (u + x - x_prev)
+            u1 = a * (S[_V_U1 + i] + v - S[_V_V + i])
+            u = a * (S[_V_U + i] + u1 - S[_V_U1 + i])
+            S[_V_V + i], S[_V_U1 + i], S[_V_U + i] = v, u1, u
+            power += u * u
+        ms = S[_V_SIGMA] ** 2
+        ms += min(1.0, dt / C[5]) * (power - ms)
+        S[_V_SIGMA] = math.sqrt(ms)
+        S[_V_C] *= math.exp(-dt / _SWING_WINDOW_S)
+        for i in range(3):
+            u = S[_V_U + i]
+            if abs(u) > C[6]:
+                sign = math.copysign(1.0, u)
+                if S[_V_S + i] == -sign:
+                    S[_V_C] += 1.0
+                S[_V_S + i] = sign
+        S[_V_CLOCK] += dt
+        if S[_V_SIGMA] > C[6] and S[_V_C] >= C[11]:  # oscillating: halve, count afresh
+            S[_V_H] = max(C[10], 0.5 * S[_V_H])
+            S[_V_C] = 0.0
+            S[_V_HALVED], S[_V_HAS_HALVED], S[_V_MARGINED] = S[_V_CLOCK], 1.0, 0.0
+        elif (
+            S[_V_MARGINED] == 0.0 and S[_V_HAS_HALVED] != 0.0 and S[_V_CLOCK] - S[_V_HALVED] >= C[8]
+        ):  # quiet at h after oscillating at 2h: h/2
+            S[_V_H] = max(C[10], 0.5 * S[_V_H])
+            S[_V_MARGINED] = 1.0
+        elif S[_V_MARGINED] != 0.0:
+            S[_V_H] = min(1.0, S[_V_H] * math.exp(C[9] * dt))
+    for i in range(3):
+        S[_V_P + i] = p_B[i]
+    S[_V_HAS_P] = 1.0
+
+
+_VARIABLE_LAW = types.void(
+    types.float64[::1],
+    types.float64[::1],
+    types.float64,
+    _IN,
+    _IN,
+    _IN,
+    types.int64,
+    types.float64[::1],
+)
+
+
+@njit(cache=True, nogil=True)
+def _variable_law(S, C, t, F, tau, p_B, code, out):  # pragma: no cover - compiled
+    """VariableAdmittance.step into out[:3] (code & 1: with the oscillation watch on p_B), and
+    with code & 2 the rotation's eq. 10 of tau into out[3:]:
+    e = max(0, ‖F ⊘ η‖ - 1) ;  ė = (e - e_prev)/Δt ;  g = clip(1 + k tanh(ė/ė_ref), g_min, g_max) ;
+    v = sgn F (h g α) max(|F| - η, 0)"""
+    e = max(0.0, _scaled_norm_at(F, C[_V_GAINS + 3 : _V_GAINS + 6]) - 1.0)
+    has_dt = S[_V_HAS_T] != 0.0
+    dt = t - S[_V_T] if has_dt else 0.0
+    e_dot = (e - S[_V_E]) / dt if has_dt and dt > 0.0 else 0.0
+    S[_V_T], S[_V_HAS_T], S[_V_E] = t, 1.0, e
+    if code & _VAR_WATCH and has_dt and dt > 0.0 and C[7] != 0.0:
+        _oscillation_watch(S, C, dt, p_B)
+    g = 1.0 + C[0] * math.tanh(e_dot / C[1])
+    g = min(max(g, C[2]), C[3])
+    S[_V_G] = g
+    gains = C[_V_GAINS:]
+    _eq10_at(F, S[_V_H] * g, gains[0:3], gains[3:6], out, 0)
+    if code & _VAR_ROTATION:
+        _eq10_at(tau, 1.0, gains[6:9], gains[9:12], out, 3)
+
+
+_NO_POSITION = np.zeros(3)
+
+
+class KernelVariableAdmittance:
+    """`VariableAdmittance`, compiled: the same parameters, state properties (`factor`,
+    `stability`, `swings`, `oscillation_m_s`), `reset`, `step` and `step_twist`, the state in one
+    array. `step_twist` runs the rotation's eq. 10 in the same call."""
+
+    def __init__(self, params: VariableAdmittanceParams | None = None) -> None:
+        warm_up_laws()
+        self.state = np.zeros(_V_STATE)
+        self.constants = np.zeros(_V_CONSTANTS)
+        self._gains: tuple[object, object] | None = None
+        self.params = params or VariableAdmittanceParams()
+        self.reset()
+
+    @property
+    def params(self) -> VariableAdmittanceParams:
+        return self._params
+
+    @params.setter
+    def params(self, params: VariableAdmittanceParams) -> None:
+        self._params = p = params
+        self.constants[:_V_GAINS] = (
+            p.intent_gain,
+            p.intent_rate_per_s,
+            p.slope_min,
+            p.slope_max,
+            p.oscillation_cutoff_hz,
+            p.oscillation_window_s,
+            p.oscillation_threshold_m_s,
+            float(p.oscillation_watch),
+            p.oscillation_quiet_s,
+            p.oscillation_recover_per_s,
+            p.oscillation_min,
+            p.oscillation_swings,
+        )
+
+    def reset(self) -> None:
+        S = self.state
+        S[...] = 0.0
+        S[_V_G] = S[_V_H] = S[_V_MARGINED] = 1.0
+
+    factor = property(lambda self: float(self.state[_V_G]), doc="g of the last step")
+    stability = property(lambda self: float(self.state[_V_H]), doc="h: the watch's factor")
+    swings = property(lambda self: float(self.state[_V_C]), doc="c")
+    oscillation_m_s = property(lambda self: float(self.state[_V_SIGMA]), doc="σ")
+
+    def _set_gains(self, translation: AdmittanceGains, rotation: AdmittanceGains | None) -> None:
+        g = self.constants[_V_GAINS:]
+        g[0:3], g[3:6] = translation.slope, translation.deadband
+        if rotation is not None:
+            g[6:9], g[9:12] = rotation.slope, rotation.deadband
+
+    def step(self, t: float, F: Vec3, slope: Vec3, deadband: Vec3, p_B: Vec3 | None = None) -> Vec3:
+        g = self.constants[_V_GAINS:]
+        g[0:3], g[3:6] = slope, deadband
+        self._gains = None
+        out = np.empty(6)
+        code = _VAR_WATCH if p_B is not None else 0
+        _variable_law(
+            self.state, self.constants, t, F, F, _NO_POSITION if p_B is None else p_B, code, out
+        )
+        return out[:3]
+
+    def step_twist(
+        self,
+        t: float,
+        F: Vec3,
+        tau: Vec3,
+        translation: AdmittanceGains,
+        rotation: AdmittanceGains,
+        p_B: Vec3 | None = None,
+    ) -> Vec:
+        if (
+            self._gains is None
+            or self._gains[0] is not translation
+            or self._gains[1] is not rotation
+        ):
+            self._set_gains(translation, rotation)
+            self._gains = (translation, rotation)
+        code = _VAR_WATCH if p_B is not None else 0
+        eq10 = rotation.law in ("deadband_linear", "variable")
+        if eq10:
+            code |= _VAR_ROTATION
+        out = np.empty(6)
+        _variable_law(
+            self.state, self.constants, t, F, tau, _NO_POSITION if p_B is None else p_B, code, out
+        )
+        if not eq10:
+            out[3:] = apply_law(tau, rotation)
+        return out
+
+
+# --- release detection (release.ReleaseDetector) ------------------------------------------------
+
+
+_RELEASE_NORMS = types.UniTuple(types.float64, 3)(_IN, _IN, _IN, _IN)
+
+
+@njit(cache=True, nogil=True)
+def _release_norms(F, eta, F_raw, band):  # pragma: no cover - compiled
+    """‖F ⊘ η‖, ‖F_raw ⊘ b‖ and ‖(F - F_raw) ⊘ b‖ (release.scaled_norm, three times)."""
+    gap = np.empty(3)
+    for i in range(3):
+        gap[i] = F[i] - F_raw[i]
+    return _scaled_norm_at(F, eta), _scaled_norm_at(F_raw, band), _scaled_norm_at(gap, band)
+
+
+class KernelReleaseDetector(ReleaseDetector):
+    """`ReleaseDetector` with its two norms a tick in one compiled call."""
+
+    def __init__(self, params: ReleaseParams | None = None) -> None:
+        warm_up_laws()
+        super().__init__(params)
+
+    def _norms(
+        self, F: Vec3, F_raw: Vec3 | None, deadband: Vec3
+    ) -> tuple[float, float | None, float | None]:
+        if F_raw is None:
+            return _release_norms(F, deadband, F, deadband)[0], None, None
+        return _release_norms(F, deadband, F_raw, self._band(deadband))
+
+
+def warm_up_laws() -> None:
+    """Load (or compile) the controller's kernels now (once per process): the variable law's, the
+    release detector's and the passivity controller's. Their blocks call it when they are built."""
+    if "laws" not in _warm:
+        _load(_variable_law, _VARIABLE_LAW)
+        _load(_release_norms, _RELEASE_NORMS)
+        _load(_passivity, _PASSIVITY)
+        _warm.add("laws")
+
+
+def variable_law(
+    params: VariableAdmittanceParams | None = None,
+) -> VariableAdmittance | KernelVariableAdmittance:
+    """The variable law for a controller built now: compiled, or the pure reference."""
+    return (KernelVariableAdmittance if kernels_enabled() else VariableAdmittance)(params)
+
+
+def release_detector(params: ReleaseParams | None = None) -> ReleaseDetector:
+    """The release detector for a controller built now: compiled norms, or the pure reference."""
+    return (KernelReleaseDetector if kernels_enabled() else ReleaseDetector)(params)
+
+
+def passivity_controller(
+    params: PassivityParams | None = None,
+) -> PassivityController | KernelPassivityController:
+    """The passivity observer and controller for a controller built now: compiled, or the pure
+    reference."""
+    return (KernelPassivityController if kernels_enabled() else PassivityController)(params)

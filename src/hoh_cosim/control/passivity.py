@@ -97,3 +97,11 @@ class PassivityController:
         beta = -deficit / (dt * FF)
         self.dissipated_J += -deficit
         return v_c + beta * F, True
+
+    def step(self, t: float, F: Vec3, p_B: Vec3, v_c: Vec3, control: bool) -> tuple[Vec3, bool]:
+        """One controller tick: the PO (`observe`), then, if `control`, the PC on the command
+        (`control`); the command (v_c itself when the PC did not act) and whether it acted."""
+        dt = self.observe(t, F, p_B)
+        if not control:
+            return v_c, False
+        return self.control(v_c, F, dt)

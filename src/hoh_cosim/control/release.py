@@ -10,12 +10,15 @@ newest unfiltered packet (compensated the same way), η the deadband of eq. 10 a
 (axes with η = 0 left out):
 
     trend       n = ‖F̂‖_η ,   ṅ = (n - n_prev) / Δt
-    release     guiding  and  ‖F_raw‖_b <= 1  and  n + h ṅ <= 1  and  ṅ <= -ṅ_min
+    release     guiding  and  ‖F_raw‖_b <= 1  and  ṅ <= -ṅ_min  and
+                    ( n + h ṅ <= 1  or  ‖F̂ - F_raw‖_b >= k_gap )
                 with b = max(η, raw_band_N) per axis: the raw packet's own noise band, so that a
                 narrow deadband does not wait for a quiet packet
-                (the newest packet is already back inside that band, the estimate is falling
-                fast and will be inside within the horizon h: the hand has let go; a light push
-                whose raw packet dips into the deadband by noise is not falling fast)
+                (the newest packet is already back inside that band and the estimate is falling
+                fast: it will be inside within the horizon h, or the packet is already k_gap
+                noise bands below it: the hand has let go; a light push whose raw packet dips
+                into the deadband by noise is not falling fast, and no noise puts a packet of a
+                firm push k_gap > 1 bands away from the estimate)
     hold        released: the command is rest until a push that grows (ṅ > 0) and that the raw
                 packet confirms above its noise band (‖F_raw‖_b > 1) is either firm, n > k_re
                 (re-engage at once), or
@@ -27,6 +30,15 @@ The trend of the estimate is the "release detection" of the literature on variab
 (Lecours, Mayer-St-Onge and Gosselin, ICRA 2012: the operator's intent read from the sign of the
 acceleration of the motion they ask for: decelerating means stopping); here the force's own fall,
 confirmed by the raw packet, decides before the filtered force reaches the deadband.
+
+Why the gap. The filters follow a step in a few tens of milliseconds (`lead_lowpass`: a 47 ms time
+constant), so one controller period after the first packet that shows the release the estimate of
+a 5 N push has fallen by about 6 %, and the horizon alone waits one or two more periods (8 ms each
+on a CB3, the tip at 5 cm/s: 0.4 mm each). The packet itself is the evidence: back inside its
+noise band while the estimate is k_gap = 3 bands (3.5 N on x) further out is more than the
+sensor's noise (at most one band) and the estimate's lag of a hand's steering (a hand's force
+changes at under 10 Hz) make together; it is a release, or the hand easing off so fast that braking
+to rest is what it asks for.
 
 State: the phase (`ReleasePhase`): IDLE (no motion asked), GUIDING (the law commands motion),
 RELEASED_AIR or RELEASED_CONTACT (the hand let go with the probe in the air or in contact with the
@@ -70,6 +82,8 @@ class ReleaseParams:
     horizon_s: h, how far ahead the estimate's trend is extrapolated.
     min_fall_per_s: ṅ_min [1/s], the fall of ‖F̂‖_η (deadbands per second) that counts as letting
         go: 20/s is a 5 N push on η = 0.95 N gone within a quarter second.
+    gap_bands: k_gap, how many noise bands b the raw packet must lie from the estimate to tell a
+        release before the estimate's trend does.
     hold_s: how long the brake holds unless a firm push (‖F̂‖_η > reengage_factor) comes.
     reengage_factor: k_re, a push this many deadbands strong ends the hold at once.
     contact_threshold_N: probe contact force above which a release is RELEASED_CONTACT.
@@ -80,6 +94,7 @@ class ReleaseParams:
     UNITS: ClassVar[dict[str, Any]] = {
         "horizon_s": "s",
         "min_fall_per_s": "1/s",
+        "gap_bands": "1",
         "hold_s": "s",
         "reengage_factor": "1",
         "contact_threshold_N": "N",
@@ -89,6 +104,7 @@ class ReleaseParams:
     enabled: bool = False
     horizon_s: float = 0.05
     min_fall_per_s: float = 20.0
+    gap_bands: float = 3.0
     hold_s: float = 0.15
     reengage_factor: float = 2.0
     contact_threshold_N: float = 1.0
@@ -108,6 +124,7 @@ class ReleaseParams:
         object.__setattr__(
             self, "reengage_factor", as_scalar(self.reengage_factor, "reengage_factor", low=1.0)
         )
+        object.__setattr__(self, "gap_bands", as_scalar(self.gap_bands, "gap_bands", low=1.0))
 
 
 def scaled_norm(F: Vec3, deadband: Vec3) -> float:
@@ -160,6 +177,17 @@ class ReleaseDetector:
             self._band_of = (deadband, self.params)  # keeps the ids valid
         return self._band_value
 
+    def _norms(
+        self, F: Vec3, F_raw: Vec3 | None, deadband: Vec3
+    ) -> tuple[float, float | None, float | None]:
+        """n = ‖F̂‖_η, ‖F_raw‖_b and ‖F̂ - F_raw‖_b (None without a raw packet); the compiled
+        detector (`hoh_cosim.control.kernels.KernelReleaseDetector`) computes them in one call."""
+        n = scaled_norm(F, deadband)
+        if F_raw is None:
+            return n, None, None
+        band = self._band(deadband)
+        return n, scaled_norm(F_raw, band), scaled_norm(F - F_raw, band)
+
     def step(
         self,
         t: float,
@@ -174,12 +202,11 @@ class ReleaseDetector:
         alone), `commanding` whether the law asks for motion, `F_probe` the probe contact force
         (None: no probe sensor). Returns whether the controller must hold the robot at rest."""
         p = self.params
-        n = scaled_norm(F, deadband)
+        n, b_raw, gap = self._norms(F, F_raw, deadband)
         dt = None if self._t_prev is None else t - self._t_prev
         # ṅ = (‖F̂‖_η - ‖F̂_prev‖_η)/Δt: the trend of the force's size, not of each axis (an
         # axis's noise extrapolated over the horizon would look like a push)
         n_dot = (n - self._n_prev) / dt if dt is not None and dt > 0.0 else 0.0
-        b_raw = None if F_raw is None else scaled_norm(F_raw, self._band(deadband))
         self._t_prev, self._n_prev = t, n
 
         if self.phase.released:
@@ -194,8 +221,10 @@ class ReleaseDetector:
 
         if p.enabled and self.phase == ReleasePhase.GUIDING:
             raw_inside = b_raw is None or b_raw <= 1.0
-            # n + h ṅ <= 1: inside the deadband within the horizon
-            if raw_inside and n + p.horizon_s * n_dot <= 1.0 and n_dot <= -p.min_fall_per_s:
+            # n + h ṅ <= 1: inside the deadband within the horizon; or the packet already k_gap
+            # noise bands below the estimate
+            soon = n + p.horizon_s * n_dot <= 1.0 or (gap is not None and gap >= p.gap_bands)
+            if raw_inside and soon and n_dot <= -p.min_fall_per_s:
                 contact = (
                     F_probe is not None and float(F_probe.dot(F_probe)) > p.contact_threshold_N**2
                 )

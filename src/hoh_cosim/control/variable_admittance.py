@@ -63,9 +63,11 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from hoh_cosim.control.admittance import deadband_linear
+import numpy as np
+
+from hoh_cosim.control.admittance import AdmittanceGains, apply_law, deadband_linear
 from hoh_cosim.control.release import scaled_norm
-from hoh_cosim.control.vectors import Vec3, as_scalar
+from hoh_cosim.control.vectors import Vec, Vec3, as_scalar
 from hoh_cosim.errors import ConfigError
 
 __all__ = ["VariableAdmittance", "VariableAdmittanceParams"]
@@ -219,3 +221,17 @@ class VariableAdmittance:
         g = 1.0 + p.intent_gain * math.tanh(e_dot / p.intent_rate_per_s)
         self.factor = g = min(max(g, p.slope_min), p.slope_max)
         return deadband_linear(F, (self.stability * g) * slope, deadband)
+
+    def step_twist(
+        self,
+        t: float,
+        F: Vec3,
+        tau: Vec3,
+        translation: AdmittanceGains,
+        rotation: AdmittanceGains,
+        p_B: Vec3 | None = None,
+    ) -> Vec:
+        """The twist [v; ω] of one controller tick: v from this law with the translation's slope
+        and deadband, ω from the rotation's own law (`apply_law`), as a new 6-vector."""
+        v = self.step(t, F, translation.slope, translation.deadband, p_B)
+        return np.concatenate([v, apply_law(tau, rotation)])
