@@ -439,7 +439,13 @@ class _World:
         if self.task_held and self.go:  # the rebias is done: the hand comes in a moment
             self.task_held = False
             start = t + TASK_LEAD_S
-            self.operator.retune(dataclasses.replace(self.operator.params, start_s=start))
+            params = self.operator.params
+            # a push that lets go lets go as long after the hand came as the task's own start
+            # (0 s) is before its release_s, not at that time of a clock the rebias has used up
+            release_s = start + params.release_s if params.task == "push_release" else None
+            self.operator.retune(
+                dataclasses.replace(params, start_s=start, release_s=release_s or params.release_s)
+            )
         hand = self.hand = self.operator.step(t, WORLD_DT, self.outputs)
         if self.breathing is not None:
             breath = self.breathing.step(t, WORLD_DT, {})
