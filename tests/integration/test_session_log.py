@@ -578,6 +578,22 @@ def chunk_spans(path: Path) -> list[tuple[int, int]]:
     return spans
 
 
+def test_a_backlog_is_cut_into_chunks_of_the_sessions_time(tmp_path):
+    # 2500 cycles of 2 ms (5 s of a session) handed over within a fraction of a second, as a
+    # writer held back on a busy machine finds them: still a chunk per second of the session,
+    # so a log cut off anywhere keeps all but about a second of what came before the cut
+    path = tmp_path / "backlog.mcap"
+    log = SessionLog(path, {"kind": "backlog"}, flush_s=1.0, capacity=4096).start()
+    try:
+        for i in range(2500):
+            fill(log.row, i, {}, ft=False, probe=False)
+            log.cycle()
+    finally:
+        log.close()
+    assert read_session(path).messages["/robot"][-1]["k"] == 2499
+    assert len(chunk_spans(path)) >= 5
+
+
 @pytest.mark.parametrize("where", ["second-chunk", "middle-chunk", "last-chunk", "summary"])
 def test_a_log_cut_off_is_read_up_to_the_cut(chunked, tmp_path, where):
     data = chunked.read_bytes()
@@ -612,8 +628,8 @@ def test_a_writer_killed_before_its_first_flush_leaves_an_incomplete_session(tmp
     log = SessionLog(path, {"kind": "early"}, flush_s=FLUSH_S).start()
     process = log._process
     try:
-        for i in range(20):
-            fill_constant(log.row, i)
+        for i in range(20):  # 40 ms of the session: no chunk is due on its clock either
+            fill(log.row, i, {}, ft=False, probe=False)
             log.cycle()
         time.sleep(0.3)  # the writer has written its header and metadata, not yet a chunk
         os.kill(process.pid, signal.SIGKILL)

@@ -24,7 +24,9 @@ event, so a log can be replayed with exactly the settings that produced it.
 The control loop never writes the file, nor even encodes a message. It copies each cycle, as one row
 of floats in a fixed layout (`CYCLE_LAYOUT`), into a ring buffer in shared memory, a few
 microseconds; a writer process of its own turns rows into messages, writes them and flushes a chunk
-every `flush_s` seconds, so a killed runner loses at most that much. (A writer thread was tried
+every `flush_s` seconds (of wall time, and of the session's time, so that a writer that falls
+behind on a busy machine still cuts its backlog into chunks of that length), so a killed runner
+loses at most that much. (A writer thread was tried
 first: its work, done under the interpreter's lock, delayed the 500 Hz loop by up to 8 ms every
 second.) If the writer falls a whole ring behind, the rows it missed are reported as an event.
 `read_session` reads a complete file or one that was cut off.
@@ -499,6 +501,7 @@ def _writer_main(
             add("/events", last[1], {"k": first, "event": "log_overflow", "detail": detail})
 
         done, last_flush = 0, time.monotonic()
+        flushed_t = 0.0  # the session time [s] of the last cycle before the last flush
         counts: dict[str, int] = {}  # the sensor channels' last written sample counts
         finishing = orphaned = False
         last = (0, 0.0)  # the last cycle written: k, t
@@ -520,6 +523,11 @@ def _writer_main(
                 for topic, message in _messages(row, counts):
                     add(topic, float(row[1]), message)
                 last = (int(row[0]), float(row[1]))
+                # a chunk holds at most flush_s of the session's time too, however late the
+                # writer got to it: a backlog drained at once is not one chunk of many seconds
+                if last[1] - flushed_t >= flush_s:
+                    writer.flush()
+                    flushed_t, last_flush = last[1], time.monotonic()
             done = head
             drain_events()
             if finishing and done >= written.value:
@@ -532,7 +540,7 @@ def _writer_main(
             if time.monotonic() - last_flush >= flush_s:
                 writer.flush()
                 stream.flush()
-                last_flush = time.monotonic()
+                flushed_t, last_flush = last[1], time.monotonic()
             if done >= written.value:
                 time.sleep(0.02)
         writer.finish()
