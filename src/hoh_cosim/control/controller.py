@@ -163,7 +163,15 @@ class HandGuidingController:
         Port("F_hand_meas_B", 3, "N", "newest compensated, unfiltered wrist force, in B (held)"),
         Port("tau_probe_B", 3, "N.m", "the contact force's moment about the torque's point, in B"),
         Port("probe_axis_B", 3, "1", "the probe's axis in B, a unit vector from handle to tip"),
+        Port(
+            "F_probe_meas_B",
+            3,
+            "N",
+            "newest corrected, unfiltered probe-sensor force, in B (held): the hold's force",
+        ),
     )
+    # left out of a scenario it is 0, and the hold regulates the wrist's packet instead
+    OPTIONAL_INPUTS: ClassVar[frozenset[str]] = frozenset({"F_probe_meas_B"})
     outputs: ClassVar[tuple[Port, ...]] = (
         Port(
             "twist_B",
@@ -324,7 +332,14 @@ class HandGuidingController:
                 in_contact = braking and self._release.phase == ReleasePhase.RELEASED_CONTACT
                 if hold.watch(t, F, p.translation.deadband, axis, F_probe, in_contact):
                     hold.engage(
-                        F, inputs["F_hand_B"], F_probe, axis, inputs["p_BT_B"], self._v_prev
+                        t,
+                        F,
+                        inputs.get("F_hand_meas_B"),
+                        F_probe,
+                        axis,
+                        inputs["p_BT_B"],
+                        self._v_prev,
+                        inputs.get("F_probe_meas_B"),
                     )
                     holding = True
             if holding:
@@ -338,6 +353,9 @@ class HandGuidingController:
                     F_probe,
                     inputs["p_BT_B"],
                     v,
+                    inputs.get("F_probe_meas_B"),
+                    inputs["probe_age"][0],
+                    inputs["ft_age"][0],
                 )
                 if v_hold is not None:
                     braking = False

@@ -381,6 +381,12 @@ class Estimator:
         Port("rejected_packets", 1, "1", "packets rejected for NaN or infinite values"),
         Port("F_probe_meas_P", 3, _F, "latest rebiased probe packet, uncorrected, in P (held)"),
         Port("F_probe_corr_P", 3, _F, "the same packet corrected, in P (held)"),
+        Port(
+            "F_probe_meas_B",
+            3,
+            _F,
+            "the same corrected packet turned into B, unfiltered (held): R_BS R_SP F_probe_corr_P",
+        ),
         Port("probe_check", 1, "1", "1 during the probe check (hand off, probe tip pressed)"),
         Port(
             "probe_mismatch", 1, "N", "low-passed disagreement of the two sensors across the axis"
@@ -577,6 +583,7 @@ class Estimator:
                 "rejected_packets": self._rejected_out,
                 "F_probe_meas_P": self._m_P,
                 "F_probe_corr_P": self._f_P,
+                "F_probe_meas_B": _ZERO3,
                 "probe_check": _FLAG[self._checking],
                 "probe_mismatch": _FLAG[False],
                 "probe_drift": _FLAG[False],
@@ -623,6 +630,8 @@ class Estimator:
             # held too: replaced, never written into, when a probe packet arrives
             "F_probe_meas_P": self._m_P,
             "F_probe_corr_P": self._f_P,
+            # the hold's force (hoh_cosim.control.hold): the packet without the filter's lag
+            "F_probe_meas_B": R_BS.dot(self._R_SP.dot(self._f_P)) if self._use_probe else _ZERO3,
             "probe_check": _FLAG[self._checking],
             "probe_mismatch": self._mismatch_out,
             "probe_drift": _FLAG[self._mismatch > self._drift_threshold_N],

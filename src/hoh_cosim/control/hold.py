@@ -48,15 +48,22 @@ hand does freehand, and what this block does once the hand is off the handle.
                supervisor's limits (speed, acceleration, soft cap, workspace, stops) apply after it,
                as to every command
 
-Which force: the axial component of the wrist sensor's newest packet (compensated, unfiltered:
-`F_hand_meas_B`, hand and contact together), which is the contact alone once the hand is off: the
-FT-150's own noise (0.09 N σ along its z, the probe's axis) and nothing else; the probe sensor's
-estimate only while no wrist packet is wired in. The probe sensor's own estimate is no force to
-regulate on: its housing hides any change smaller than its play (0.2-0.8 N per axis, seed 3.B.2),
-and it comes at 50 Hz through its filter's lag; a loop closed on it at this tuning swung the
-contact by 3.9 N std through the breaths (docs/decisions.md, "Hold-on-release"). The probe sensor
-decides contact, the setpoint, the soft cap and the stop. `max_force_N` stays below the
-supervisor's soft cap (20 N) so that the loop never leans on it.
+Which force (`force_source`). `wrist`, the default: the axial component of the wrist sensor's
+newest packet (compensated, unfiltered: `F_hand_meas_B`, hand and contact together), the contact
+alone once the hand is off (the FT-150's 0.09 N σ along the probe). A hand resting on the handle
+when the hold engages is in it: its opening is a step of its share, which the loop answers by
+drawing the probe back (docs/decisions.md: the cause of the hold's image jitter in the clinical
+study, not the sensor's noise). `probe`: the probe sensor's newest packet (`F_probe_meas_B`, else
+its filtered estimate), which the hand is not in; but the housing's play (0.2-0.8 N per axis,
+seed 3.B.2) hides the contact's changes inside it, the measurement then follows the tip's own
+position (m = z), and the loop, which commands the velocity it estimates, limit-cycles at about
+1.6 Hz (3.4 N std in the clinical view): kept for the measurement, not for use. `combined`: the
+wrist's packet plus the hand's share ĥ that the probe sensor tells at a hand's event (`HandShare`):
+c = c_w + ĥ, free of the play where the contact moves under the hold, free of the hand where it
+opens or pushes. In every case m takes the tip's position when the regulated packet was sampled
+(the packet's age and `latency_s` back), and the filter predicts over that delay besides
+`lookahead_s`. The probe sensor decides contact, the setpoint, the soft cap and the stop.
+`max_force_N` stays below the supervisor's soft cap (20 N) so that the loop never leans on it.
 """
 
 from __future__ import annotations
@@ -72,14 +79,21 @@ import numpy as np
 
 from hoh_cosim.control.release import scaled_norm
 from hoh_cosim.control.vectors import Vec, Vec3, as_nonnegative_vector, as_scalar, frozen
+from hoh_cosim.errors import ConfigError
 
 __all__ = [
+    "FORCE_SOURCES",
     "ContactHold",
     "HoldEnd",
     "HoldParams",
     "HoldPhase",
     "surface_observer_gain",
 ]
+
+
+FORCE_SOURCES = ("combined", "wrist", "probe")
+"""The sensor whose newest packet the hold regulates (module docstring)."""
+_HISTORY_S = 0.1  # [s] the tip positions kept to match a packet's age (the FSE103's is under 0.02)
 
 
 class HoldPhase(enum.IntEnum):
@@ -111,6 +125,7 @@ class HoldParams:
         "position_gain": "1/s",
         "ki": "1/s",
         "lookahead_s": "s",
+        "latency_s": "s",
         "contact_N": "N",
         "max_force_N": "N",
         "engage_s": "s",
@@ -118,9 +133,16 @@ class HoldParams:
         "window_s": "s",
         "ramp_N_s": "N/s",
         "axial_band_N": "N",
+        "share_band_N": "N",
+        "share_window_s": "s",
+        "share_event_s": "s",
+        "share_rest_s": "s",
+        "share_min_N": "N",
+        "share_filter_s": "s",
         "raw_band_N": "N",
         "reengage_factor": "1",
         "confirm_s": "s",
+        "touch_tau_s": "s",
         "blend_s": "s",
         "loss_N": "N",
         "loss_s": "s",
@@ -130,6 +152,19 @@ class HoldParams:
     }
 
     enabled: bool = False
+    # FORCE_SOURCES: what the hold regulates (module docstring); the clinical study's hold mode
+    # sets combined, rehearsed in simulation only so far (docs/decisions.md)
+    force_source: str = "wrist"
+    # the hand's share (`HandShare`): an event is the sensors' difference moving past the band
+    # within the window; it is followed that long at most, one each way per hold, a rest apart,
+    # and undone if it moved the share less than share_min_N (the probe's play at a breath's turn)
+    share_band_N: float = 1.0  # [N]
+    share_window_s: float = 0.3  # [s]
+    share_event_s: float = 0.3  # [s]
+    share_rest_s: float = 1.0  # [s]
+    share_min_N: float = 1.5  # [N]
+    share_filter_s: float = 0.02  # [s] the difference's low-pass (the sensors' noise)
+    latency_s: float = 0.002  # [s] a packet's sample to its arrival (FSE103 and FT-150 alike)
     # k̂ [N/m]: the tissue's stiffness about the working force (the simulated phantom's is
     # 1000-1560 N/m at 5-20 N; a factor of two either way stays stable, module docstring)
     stiffness_N_m: float = 1200.0
@@ -153,6 +188,7 @@ class HoldParams:
     raw_band_N: Vec3 = field(default_factory=lambda: frozen([1.15, 1.15, 0.31]))  # across it
     reengage_factor: float = 2.0  # a touch this many bands strong hands back at once
     confirm_s: float = 0.15  # [s] ... a weaker one (above one band) after this long
+    touch_tau_s: float = 0.5  # [s] across the axis, F̃'s reference follows it this slowly
     blend_s: float = 0.2  # [s] the hand-back's blend
     loss_N: float = 0.5  # [N] probe force under which the contact is lost
     loss_s: float = 0.2  # [s] lost this long: the hold ends
@@ -164,9 +200,19 @@ class HoldParams:
         object.__setattr__(
             self, "raw_band_N", as_nonnegative_vector(self.raw_band_N, 3, "raw_band_N")
         )
+        if self.force_source not in FORCE_SOURCES:
+            raise ConfigError(
+                f"force_source: expected one of {', '.join(FORCE_SOURCES)}, "
+                f"got {self.force_source!r}"
+            )
         for name in (
             "ki",
             "lookahead_s",
+            "latency_s",
+            "share_band_N",
+            "share_event_s",
+            "share_rest_s",
+            "share_min_N",
             "engage_s",
             "settle_s",
             "confirm_s",
@@ -180,6 +226,9 @@ class HoldParams:
             "observer_hz",
             "position_gain",
             "window_s",
+            "touch_tau_s",
+            "share_window_s",
+            "share_filter_s",
             "ramp_N_s",
             "contact_N",
             "axial_band_N",
@@ -244,6 +293,75 @@ def _split_norm(F: Vec3, axis: Vec3, band: Vec3, axial_band: float) -> float:
     return max(scaled_norm(across, band), abs(along) / axial_band)
 
 
+class HandShare:
+    """ĥ, the hand's share of the wrist's axial force: what the combined force c = c_w + ĥ adds to
+    the wrist's packet c_w for the contact (module docstring, "which force").
+
+    d = c_p - c_w, the probe's axial force less the wrist's, is the hand's push plus the probe
+    sensor's error (its play, its gain error times the contact force, its noise). A hand opening
+    on the handle or taking it moves d by newtons in a tenth of a second; the probe's play, where
+    the breath turns the contact force about, by up to about 1 N. So (d low-passed over
+    `share_filter_s`, against its values over the last `share_window_s`):
+
+        event    d's range over the window passes `share_band_N`: ĥ takes d's change from the
+                 window's start at once, then each tick's, for `share_event_s` at most; one event
+                 each way (d rising: a push; falling: a hand opening) per hold, none within
+                 `share_rest_s` of the last one's end
+        undone   an event that ends (d's range back under the band) having moved ĥ by less than
+                 `share_min_N` is taken back: the probe's play, not a hand, and that way is free
+                 again
+        else     ĥ holds: the wrist's packet, free of the play, regulates the contact
+    """
+
+    def __init__(self, params: HoldParams) -> None:
+        self.params = params
+        self.reset(0.0)
+
+    def reset(self, share: float) -> None:
+        self.share = share  # ĥ [N]
+        self._d_f = share
+        self._window: deque[tuple[float, float]] = deque()  # (t, d low-passed)
+        self._t0: float | None = None  # when d began to move past the band
+        self._following = False  # ... and ĥ follows it
+        self._total = 0.0  # what this event moved ĥ by
+        self._sign = 0
+        self._ways: set[int] = set()  # the ways an event has moved ĥ in this hold
+        self._end = -math.inf  # when the last followed event ended
+
+    def step(self, t: float, dt: float, d: float) -> None:
+        p = self.params
+        d_f = self._d_f + (d - self._d_f) * min(dt / p.share_filter_s, 1.0)
+        window = self._window
+        window.append((t, d_f))
+        while t - window[0][0] > p.share_window_s + 1e-9:
+            window.popleft()
+        values = [x for _, x in window]
+        moving = max(values) - min(values) > p.share_band_N
+        if moving and self._t0 is None:
+            self._t0 = t
+            change = d_f - window[0][1]
+            self._sign = 1 if change > 0.0 else -1
+            self._following = (
+                t - self._end >= p.share_rest_s - 1e-9 and self._sign not in self._ways
+            )
+            if self._following:
+                self._ways.add(self._sign)
+                self.share += change
+                self._total = change
+        elif moving and self._following and t - self._t0 < p.share_event_s - 1e-9:
+            self.share += d_f - self._d_f
+            self._total += d_f - self._d_f
+        elif not moving and self._t0 is not None:
+            self._t0 = None
+            if self._following:
+                self._following = False
+                self._end = t
+                if abs(self._total) < p.share_min_N:  # the play, not a hand: undone
+                    self.share -= self._total
+                    self._ways.discard(self._sign)
+        self._d_f = d_f
+
+
 class ContactHold:
     """The hold's state machine and its force law (module docstring), stepped by the controller."""
 
@@ -269,6 +387,8 @@ class ContactHold:
         self._integral = 0.0  # [m] ∫ (c_ref - c) / k̂ dt
         self._axis = np.zeros(3)
         self._F0 = np.zeros(3)  # F̃ at the engagement
+        self._low = [0.0, 0.0]
+        self._ref = [np.zeros(3), np.zeros(3)]
         self._p0 = 0.0  # the tip along the axis at the engagement
         self._touch_since: float | None = None
         self._t_back: float | None = None
@@ -276,6 +396,8 @@ class ContactHold:
         self._lost_at = 0.0  # the tip along the axis when the contact was lost
         self._band_key: tuple[int, int] | None = None
         self._band_value = np.zeros(3)
+        self._history: deque[tuple[float, float]] = deque()  # (t, z) of the last ticks
+        self._hand = HandShare(self.params)  # ĥ, the hand's share (force_source combined)
 
     @property
     def active(self) -> bool:
@@ -301,12 +423,51 @@ class ContactHold:
             self._gain_of = self.params  # keeps the id valid
         return self._gain.tolist()
 
-    def regulated(self, F_meas_B: Vec3 | None, F_probe_B: Vec3, axis_B: Vec3) -> float:
-        """The axial contact force the hold regulates, pressing positive: the phantom pushes the
-        probe back along -a, so c = -F·a of the wrist's newest packet (module docstring); without
-        one (None) the probe sensor's estimate."""
-        F = F_probe_B if F_meas_B is None else F_meas_B
-        return -float(F.dot(axis_B))
+    def regulated(
+        self,
+        F_meas_B: Vec3 | None,
+        F_probe_B: Vec3,
+        axis_B: Vec3,
+        F_probe_meas_B: Vec3 | None = None,
+        t: float | None = None,
+        dt: float = 0.0,
+    ) -> tuple[float, bool]:
+        """(c, from the probe): the axial contact force the hold regulates, pressing positive (the
+        phantom pushes the probe back along -a, so c = -F·a), `force_source` (module docstring):
+        combined c = c_w + ĥ, wrist c_w, probe c_p; the probe's newest packet where it is wired
+        (exactly zero: not wired), else its filtered estimate; the wrist's newest packet, else the
+        probe's. The flag says whether the newest packet's age is the probe's."""
+        p = self.params
+        if F_probe_meas_B is not None and F_probe_meas_B.any():
+            c_p = -float(F_probe_meas_B.dot(axis_B))
+        else:
+            c_p = -float(F_probe_B.dot(axis_B))
+        if F_meas_B is None or p.force_source == "probe":
+            return c_p, True
+        c_w = -float(F_meas_B.dot(axis_B))
+        if p.force_source == "wrist":
+            return c_w, False
+        # c = c_w + ĥ: the wrist's packet, plus the hand's share as the two sensors' difference
+        # tells it at a hand's event (`HandShare`)
+        if t is not None:
+            self._hand.step(t, dt, c_p - c_w)
+        return c_w + self._hand.share, False
+
+    def _delayed(self, t: float, z: float, age: float) -> float:
+        """The tip along the axis when the regulated packet was sampled (`age` after its arrival,
+        `latency_s` before it), from the positions of the last ticks: the force and the position
+        the surface estimate combines must be of the same instant (module docstring)."""
+        history = self._history
+        history.append((t, z))
+        while len(history) > 2 and t - history[1][0] >= _HISTORY_S:
+            history.popleft()
+        when = t - age - self.params.latency_s
+        t1, z1 = history[-1]
+        for t0, z0 in reversed(history):
+            if t0 <= when:
+                return z0 if t1 <= t0 else z0 + (z1 - z0) * (when - t0) / (t1 - t0)
+            t1, z1 = t0, z0
+        return history[0][1]
 
     def watch(
         self,
@@ -352,19 +513,28 @@ class ContactHold:
 
     def engage(
         self,
+        t: float,
         F: Vec3,
         F_meas_B: Vec3 | None,
         F_probe_B: Vec3,
         axis_B: Vec3,
         p_BT_B: Vec3,
         v_prev: Vec3,
+        F_probe_meas_B: Vec3 | None = None,
     ) -> None:
         """Begin a hold: the setpoint starts at the regulated force now and moves to the level
         before it; the surface filter starts where the tip is, at its last commanded speed along
         the axis (no step in the command)."""
         p = self.params
         self._axis = axis_B.copy()
-        c = self.regulated(F_meas_B, F_probe_B, axis_B)
+        if F_meas_B is not None:  # ĥ starts at the two sensors' difference now: c = c_p
+            c_w = -float(F_meas_B.dot(axis_B))
+            F_p = (
+                F_probe_meas_B if F_probe_meas_B is not None and F_probe_meas_B.any() else F_probe_B
+            )
+            self._hand = HandShare(p)
+            self._hand.reset(-float(F_p.dot(axis_B)) - c_w)
+        c, _ = self.regulated(F_meas_B, F_probe_B, axis_B, F_probe_meas_B)
         level = c if not self._window else self._window_sum / len(self._window)
         self.target_N = min(max(level, p.contact_N), p.max_force_N)
         self.setpoint_N = c
@@ -372,8 +542,12 @@ class ContactHold:
         self._window = None
         z = float(p_BT_B.dot(axis_B))
         self._surface = [z, float(v_prev.dot(axis_B)), 0.0]
+        self._history = deque([(t, z)])
         self._integral = 0.0
         self._F0 = F.copy()
+        self._low = [float(F.dot(axis_B))] * 2  # the lowest F̃·a since, filtered and raw
+        across0 = F - float(F.dot(axis_B)) * axis_B
+        self._ref = [across0, across0.copy()]  # F̃ across the axis, followed slowly
         self._p0 = z
         self._touch_since = self._t_back = self._lost_since = None
         self._quiet_since = None
@@ -391,13 +565,42 @@ class ContactHold:
         if was:
             self.ended = HoldEnd.STOPPED
 
+    def _touch(self, dt: float, F: Vec3, a: Vec3, band: Vec3, which: int) -> float:
+        """F̃'s departure against the quiet band (> 1: a touch), module docstring.
+
+        `wrist`: F̃ away from its value at the engagement and from nothing (the hand opening, F̃
+        falling from its value at the engagement to nothing, is no touch). `combined` (the robot
+        no longer yields to the hand's push, and the probe sensor's misreading makes F̃ with
+        nobody's hand nonzero: about a quarter of the contact force along the axis in the
+        simulated housing): along the axis a push, F̃·a above the lowest it has been since the
+        engagement; across it, a departure from a reference and from nothing. The reference
+        follows F̃ with `touch_tau_s` (slow changes are the contact's: the misreading across the
+        axis grows with the force the hold keeps through the breaths) but stays within one band
+        of F̃ at the engagement, so that a hand pushing slowly sideways is heard once it pushes
+        two bands. `which`: 0 the filtered F̃, 1 the raw one."""
+        p = self.params
+        if p.force_source != "combined":
+            return min(
+                _split_norm(F - self._F0, a, band, p.axial_band_N),
+                _split_norm(F, a, band, p.axial_band_N),
+            )
+        along = float(F.dot(a))
+        low = self._low[which] = min(self._low[which], along)
+        across = F - along * a
+        ref = self._ref[which]
+        n_across = min(scaled_norm(across - ref, band), scaled_norm(across, band))
+        ref = ref + (across - ref) * min(dt / p.touch_tau_s, 1.0)
+        F0 = self._F0 - float(self._F0.dot(a)) * a
+        self._ref[which] = np.minimum(np.maximum(ref, F0 - band), F0 + band)
+        return max(n_across, (along - low) / p.axial_band_N)
+
     def _end(self, why: HoldEnd) -> None:
         self.phase = HoldPhase.OFF
         self.ended = why
         self.blend = 0.0
         self._quiet_since = None
 
-    def _law(self, dt: float, c: float, z: float) -> float:
+    def _law(self, dt: float, c: float, z: float, z_d: float, delay: float) -> float:
         """The hold's speed along the axis (module docstring)."""
         p = self.params
         k = p.stiffness_N_m
@@ -406,7 +609,7 @@ class ContactHold:
         self.setpoint_N += min(max(self.target_N - self.setpoint_N, -step), step)
         e = self.setpoint_N - c
         # m = z - (c - c_ref) / k̂: where the tip must be; the surface filter predicts, corrects
-        m = z + e / k
+        m = z_d + e / k
         s, s_dot, s_ddot = self._surface
         s, s_dot = s + dt * s_dot + 0.5 * dt * dt * s_ddot, s_dot + dt * s_ddot
         k0, k1, k2 = self._observer_gain(dt)
@@ -414,7 +617,7 @@ class ContactHold:
         s, s_dot, s_ddot = s + k0 * innovation, s_dot + k1 * innovation, s_ddot + k2 * innovation
         self._surface = [s, s_dot, s_ddot]
         # u = ṡ_τ + k_z (s_τ - z) + k_i ∫ e / k̂ dt, the filter's state τ ahead
-        tau = p.lookahead_s
+        tau = p.lookahead_s + delay
         s_ahead = s + tau * s_dot + 0.5 * tau * tau * s_ddot
         u = s_dot + tau * s_ddot + p.position_gain * (s_ahead - z) + p.ki * self._integral
         limit = p.max_speed
@@ -434,6 +637,9 @@ class ContactHold:
         F_probe_B: Vec3,
         p_BT_B: Vec3,
         v_law: Vec3,
+        F_probe_meas_B: Vec3 | None = None,
+        probe_age: float = 0.0,
+        ft_age: float = 0.0,
     ) -> Vec | None:
         """One tick of an active hold: the linear velocity to command (the angular one is rest while
         holding, β ω_law while handing back), or None when the hold has just ended (`ended` says
@@ -456,8 +662,11 @@ class ContactHold:
             self._end(HoldEnd.TRAVEL)
             return None
 
-        c = self.force_N = self.regulated(F_meas_B, F_probe_B, a)
-        v_hold = self._law(dt, c, z) * a
+        c, probe = self.regulated(F_meas_B, F_probe_B, a, F_probe_meas_B, t, dt)
+        self.force_N = c
+        age = (probe_age if probe else ft_age) + p.latency_s
+        z_d = self._delayed(t, z, age - p.latency_s)
+        v_hold = self._law(dt, c, z, z_d, age) * a
 
         if self.phase == HoldPhase.BLENDING:
             assert self._t_back is not None
@@ -469,20 +678,10 @@ class ContactHold:
             # v = (1 - β) v_hold + β v_law
             return (1.0 - beta) * v_hold + beta * v_law
 
-        # a touch of the handle: F̃ away from its value at the engagement and from nothing (the hand
-        # opening, F̃ falling from its value at the engagement to nothing, is no touch), confirmed
+        # a touch of the handle (`_touch`), confirmed by the raw packet
         band = self._band(deadband)
-        n = min(
-            _split_norm(F - self._F0, a, band, p.axial_band_N),
-            _split_norm(F, a, band, p.axial_band_N),
-        )
-        raw = F_raw is None or (
-            min(
-                _split_norm(F_raw - self._F0, a, band, p.axial_band_N),
-                _split_norm(F_raw, a, band, p.axial_band_N),
-            )
-            > 1.0
-        )
+        n = self._touch(dt, F, a, band, 0)
+        raw = F_raw is None or self._touch(dt, F_raw, a, band, 1) > 1.0
         if n > 1.0 and raw:
             if self._touch_since is None:
                 self._touch_since = t

@@ -223,9 +223,14 @@ TRANSPARENCY = (
 """The transparency issue's laws on today's defaults (docs/decisions.md, "Transparency past the
 seed"): the lead-lag low-pass filter, the variable admittance, release detection with its brake,
 the passivity observer and controller."""
-HOLD_ON_RELEASE = ("controller.release.enabled=true", "controller.hold.enabled=true")
+HOLD_ON_RELEASE = (
+    "controller.release.enabled=true",
+    "controller.hold.enabled=true",
+    "controller.hold.force_source=combined",
+)
 """Hold-on-release (`hoh_cosim.control.hold`) on today's defaults, with the release detection that
-tells it the hand let go."""
+tells it the hand let go, regulating the wrist's force plus the hand's share told by the probe
+sensor (`force_source` combined: docs/decisions.md, "Hold-on-release")."""
 
 
 @dataclass(frozen=True)
