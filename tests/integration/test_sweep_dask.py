@@ -158,6 +158,7 @@ def test_a_local_cluster_keeps_its_own_periodic_work_rare() -> None:
     """The settings reach the worker process (through its nanny) and the scheduler, the worker
     samples no stacks, and this process's settings are its own again afterwards."""
     import dask.config
+    import distributed  # noqa: F401  (Dask's defaults for these keys come with it)
 
     def settings() -> dict[str, object]:
         return {key: dask.config.get(key) for key in QUIET_CLUSTER}
