@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from hoh_cosim.cli import main
-from hoh_cosim.study.sweep import Variant, run_variants
+from hoh_cosim.study.sweep import QUIET_CLUSTER, RunPool, Variant, run_variants
 from tests.integration.test_scenarios import SCENARIOS
 
 DASK = Path(sys.executable).parent / "dask"
@@ -152,6 +152,27 @@ def test_a_failed_run_on_the_cluster_is_a_row(scheduler: str, tmp_path: Path) ->
     outcomes = run_variants([good, bad], scheduler=scheduler, progress=False)
     assert [o.status for o in outcomes] == ["ok", "failed"]
     assert "law: expected one of deadband_linear, isotropic, sigmoid" in outcomes[1].error
+
+
+def test_a_local_cluster_keeps_its_own_periodic_work_rare() -> None:
+    """The settings reach the worker process (through its nanny) and the scheduler, the worker
+    samples no stacks, and this process's settings are its own again afterwards."""
+    import dask.config
+    import distributed  # noqa: F401  (Dask's defaults for these keys come with it)
+
+    def settings() -> dict[str, object]:
+        return {key: dask.config.get(key) for key in QUIET_CLUSTER}
+
+    before = settings()
+    assert before != QUIET_CLUSTER  # Dask's defaults, else the test shows nothing
+    with RunPool(workers=1, progress=False) as pool:
+        assert list(pool.client.run(settings).values()) == [QUIET_CLUSTER]
+        assert pool.client.run_on_scheduler(settings) == QUIET_CLUSTER
+        sampling = pool.client.run(lambda dask_worker: "profile" in dask_worker.periodic_callbacks)
+        assert list(sampling.values()) == [False]
+        pool.submit([Variant(0, str(SCENARIOS / "release.yaml"), (), (), 1, 0.2)])
+        assert [o.status for o in pool.results()] == ["ok"]
+    assert settings() == before
 
 
 def test_an_unreachable_scheduler_is_a_one_line_error(

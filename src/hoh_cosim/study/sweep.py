@@ -56,6 +56,7 @@ from hoh_cosim.yamlfile import Where, read_yaml
 
 __all__ = [
     "MAX_RUNS",
+    "QUIET_CLUSTER",
     "Outcome",
     "RunPool",
     "Sweep",
@@ -78,6 +79,16 @@ the scenario before anything runs (10-30 ms a variant) and each run takes second
 is several sweeps. Without a bound, `random: {n: 2147483647}` made its variants until memory ran
 out."""
 STATUS_COLUMNS = ("status", "error", "wall_s")
+QUIET_CLUSTER: dict[str, Any] = {
+    "distributed.worker.profile.enabled": False,  # a sample of the running run's stack every 10 ms
+    "distributed.admin.tick.interval": "1s",  # each event loop's health check, every 20 ms
+    "distributed.admin.system-monitor.interval": "2s",  # CPU, memory and disk, every 500 ms
+    "distributed.worker.memory.monitor-interval": "1s",  # the nanny's memory check, every 100 ms
+}
+"""Dask settings of the local cluster that runs a study: its processes' own periodic work, which
+with Dask's defaults took about 9 % of this 2-core machine while two workers stepped (the workers'
+event loops, the nannies and the scheduler, measured per thread in `docs/decisions.md`), is made
+rare. Nothing a run computes depends on them; a cluster given by `--scheduler` keeps its own."""
 
 
 @dataclass(frozen=True)
@@ -248,6 +259,7 @@ class RunPool:
         self.futures: dict[Any, int] = {}
         self.cluster: Any = None
         self.client: Any = None
+        self._config: Any = None
 
     def __enter__(self) -> RunPool:
         if not self.serial:
@@ -264,12 +276,15 @@ class RunPool:
     def _connect(self) -> None:
         import logging
 
+        import dask.config
         from distributed import Client, LocalCluster
 
         if self.scheduler is None:
             n = self.workers if self.workers is not None else (os.cpu_count() or 1)
             if n < 1:
                 raise ConfigError(f"--workers: expected an integer >= 0, got {n}")
+            # the scheduler reads them here, the nannies hand them to their workers
+            self._config = dask.config.set(QUIET_CLUSTER)
             self.cluster = LocalCluster(
                 n_workers=min(n, self.expected) if self.expected else n,
                 threads_per_worker=1,
@@ -335,9 +350,14 @@ class RunPool:
                 self.client.close()
         finally:
             self.client = None
-            if self.cluster is not None:
-                self.cluster.close()
-                self.cluster = None
+            try:
+                if self.cluster is not None:
+                    self.cluster.close()
+                    self.cluster = None
+            finally:
+                if self._config is not None:
+                    self._config.__exit__(None, None, None)
+                    self._config = None
 
 
 def _simulated_seconds(variants: Sequence[Variant]) -> list[int]:
