@@ -440,12 +440,12 @@ class _World:
             self.task_held = False
             start = t + TASK_LEAD_S
             params = self.operator.params
-            # a push that lets go lets go as long after the hand came as the task's own start
-            # (0 s) is before its release_s, not at that time of a clock the rebias has used up
-            release_s = start + params.release_s if params.task == "push_release" else None
-            self.operator.retune(
-                dataclasses.replace(params, start_s=start, release_s=release_s or params.release_s)
-            )
+            changes = {"start_s": start}
+            if params.task == "push_release":
+                # it lets go release_s after the hand came (a scenario's task starts at 0 s), not
+                # at that time of the world's clock, which the rebias has already run past
+                changes["release_s"] = start + params.release_s
+            self.operator.retune(dataclasses.replace(params, **changes))
         hand = self.hand = self.operator.step(t, WORLD_DT, self.outputs)
         if self.breathing is not None:
             breath = self.breathing.step(t, WORLD_DT, {})
