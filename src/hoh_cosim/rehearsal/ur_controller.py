@@ -532,9 +532,10 @@ class _Emulator:
                 time.sleep(delay)
             else:
                 next_t = time.perf_counter()  # late: no burst of cycles to catch up
-            gap, last = time.perf_counter() - last, time.perf_counter()
-            if gap > STALL_EVENT_S:  # the machine held the controller back: in its log
-                self._event(f"stalled {1e3 * gap:.0f} ms")
+            started = time.perf_counter()
+            if started - last > STALL_EVENT_S:  # the machine held the controller back: in its log
+                self._event(f"stalled {1e3 * (started - last):.0f} ms")
+            last = started
             now = time.monotonic()
             with self.lock:
                 self._program_cycle(now)

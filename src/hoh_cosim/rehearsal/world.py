@@ -425,7 +425,7 @@ class _World:
                 self.health[0], self.health[1] = now - last, k * WORLD_DT
             last = now
             # after a stall of this process, catch up: the world keeps to real time
-            behind = int((time.perf_counter() - start) / WORLD_DT) - k
+            behind = int((now - start) / WORLD_DT) - k
             for _ in range(max(1, min(behind, 50))):
                 self._tick(k * WORLD_DT)
                 k += 1
