@@ -448,9 +448,14 @@ class Estimator:
         self.correction.reset()
         self._t0: float | None = None
         # rows: F_hand, τ_hand, F_probe and F_meas in S, turned into B by one product each tick;
-        # the last row holds the latest compensated wrist force between packets
+        # the fourth row holds the latest compensated wrist force between packets. The compiled
+        # tick turns three more (kernels.IN_S_ROWS): the held probe packet R_SP f_P, and the
+        # constant p_RT_S and probe axis
         self._in_S = self._filters.in_S if self._kernel else np.zeros((4, 3))
         self._in_S[...] = 0.0
+        if self._kernel:
+            self._in_S[5] = self._p_RT_S
+            self._in_S[6] = self._axis_S
         self._m_P = np.zeros(3)
         self._f_P = np.zeros(3)
         self._check_until: float | None = None
@@ -536,14 +541,14 @@ class Estimator:
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         if self._t0 is None:
             self._t0 = t
-        R_BS = inputs["R_BS"].reshape(3, 3)
+        R9 = inputs["R_BS"]  # turned into the matrix R_BS only where a product needs it
         ft, probe = self._ft, self._probe
 
         ft_z = None
         counter = inputs[ft.counter_port][0]
         if counter != ft.counter:
             w = ft.arrived(t, counter, inputs)
-            ft_z = None if w is None else self._ft_packet(w, R_BS)
+            ft_z = None if w is None else self._ft_packet(w, R9.reshape(3, 3))
             if ft_z is not None:
                 self._in_S[3] = ft_z[:3]
         probe_z = None
@@ -551,7 +556,7 @@ class Estimator:
             counter = inputs[probe.counter_port][0]
             if counter != probe.counter:
                 f = probe.arrived(t, counter, inputs)
-                probe_z = None if f is None else self._probe_packet(f, R_BS)
+                probe_z = None if f is None else self._probe_packet(f, R9.reshape(3, 3))
             probe_age = t - (self._t0 if probe.t_last is None else probe.t_last)
         else:
             probe_age = 0.0
@@ -562,6 +567,8 @@ class Estimator:
             self._m_P = probe_z
             # corrected before it is learnt from: the output is the prediction, never the reference
             probe_z = self._f_P = self.correction.correct(probe_z)
+            if self._kernel:
+                self._R_SP.dot(probe_z, out=self._in_S[4])
             if self._checking:
                 self.correction.reference(t, self._m_P, self._R_PS.dot(self._in_S[3]))
         rejected = ft.rejected + probe.rejected
@@ -576,7 +583,7 @@ class Estimator:
                 "F_hand_B": _ZERO3,
                 "tau_hand_B": _ZERO3,
                 "F_probe_B": _ZERO3,
-                "F_hand_meas_B": R_BS.dot(self._in_S[3]),
+                "F_hand_meas_B": R9.reshape(3, 3).dot(self._in_S[3]),
                 "ft_age": np.array([ft_age]),
                 "probe_age": np.array([probe_age]),
                 "ready": _FLAG[False],
@@ -588,14 +595,15 @@ class Estimator:
                 "probe_mismatch": _FLAG[False],
                 "probe_drift": _FLAG[False],
                 "tau_probe_B": _ZERO3,
-                "probe_axis_B": _turned(inputs["R_BS"], self._axis_S),
+                "probe_axis_B": _turned(R9, self._axis_S),
             }
 
         check = ft_z is not None and self._use_probe
         if self._kernel:  # what the numpy code below does, in one compiled call
-            in_B = estimator_tick(self._filters, dt, ft_z, probe_z, inputs["R_BS"], t, check)
+            in_B = estimator_tick(self._filters, dt, ft_z, probe_z, R9, t, check)
             mismatch = self._consistency.mismatch if check else self._mismatch
         else:
+            R_BS = R9.reshape(3, 3)
             if ft_z is None:
                 forces = self._filters.step_bank(dt, (None, None, probe_z))
             else:
@@ -612,12 +620,20 @@ class Estimator:
         if mismatch != self._mismatch:
             self._mismatch = mismatch
             self._mismatch_out = np.array([mismatch])
-        R9 = inputs["R_BS"]
-        F_probe_B = in_B[2] if self._use_probe else _ZERO3
-        # τ_probe = p_RT_B × F_probe_B, p_RT_B = R_BS p_RT_S: the contact's moment about R
-        r0, r1, r2 = _turned_xyz(R9, self._p_RT_S)
-        f0, f1, f2 = F_probe_B.tolist()
-        tau_probe = np.array((r1 * f2 - r2 * f1, r2 * f0 - r0 * f2, r0 * f1 - r1 * f0))
+        use_probe = self._use_probe
+        F_probe_B = in_B[2] if use_probe else _ZERO3
+        if self._kernel:  # the compiled tick's further rows
+            F_probe_meas_B = in_B[4] if use_probe else _ZERO3
+            tau_probe = in_B[7] if use_probe else _ZERO3
+            axis_B = in_B[6]
+        else:
+            R_BS = R9.reshape(3, 3)
+            F_probe_meas_B = R_BS.dot(self._R_SP.dot(self._f_P)) if use_probe else _ZERO3
+            # τ_probe = p_RT_B × F_probe_B, p_RT_B = R_BS p_RT_S: the contact's moment about R
+            r0, r1, r2 = _turned_xyz(R9, self._p_RT_S)
+            f0, f1, f2 = F_probe_B.tolist()
+            tau_probe = np.array((r1 * f2 - r2 * f1, r2 * f0 - r0 * f2, r0 * f1 - r1 * f0))
+            axis_B = _turned(R9, self._axis_S)
         return {
             "F_hand_B": in_B[0],
             "tau_hand_B": in_B[1],
@@ -631,12 +647,12 @@ class Estimator:
             "F_probe_meas_P": self._m_P,
             "F_probe_corr_P": self._f_P,
             # the hold's force (hoh_cosim.control.hold): the packet without the filter's lag
-            "F_probe_meas_B": R_BS.dot(self._R_SP.dot(self._f_P)) if self._use_probe else _ZERO3,
+            "F_probe_meas_B": F_probe_meas_B,
             "probe_check": _FLAG[self._checking],
             "probe_mismatch": self._mismatch_out,
             "probe_drift": _FLAG[self._mismatch > self._drift_threshold_N],
             "tau_probe_B": tau_probe,
-            "probe_axis_B": _turned(R9, self._axis_S),
+            "probe_axis_B": axis_B,
         }
 
 

@@ -113,18 +113,24 @@ def use_kernels(enabled: bool) -> Iterator[None]:
 #
 # A compiled call costs about 0.1 µs per argument to dispatch, more than the arithmetic of a tick,
 # so a bank keeps all its state in one array and all its constants in another:
-#   state:     x (n, 3) | P (n, 3, 3) | z (n) | in_S (4, 3) | consistency (6)
+#   state:     x (n, 3) | P (n, 3, 3) | z (n) | in_S (IN_S_ROWS, 3) | consistency (6)
 #   constants: n | F (3, 3) | r (n) | R_SP (3, 3) | consistency (8) | Q (n, 3, 3)
 # (n axes; the estimator's in_S rows and the consistency check are used by `estimator_tick` only).
 
+IN_S_ROWS = 7
+"""The estimator's rows in S that `estimator_tick` turns into B: F_hand, τ_hand, F_probe (filtered,
+the tick's), F_meas (the held wrist packet), F_probe_meas (R_SP f_P, the held probe packet), p_RT
+(the tip from the torque's point R) and the probe's axis (the last two constant)."""
+
 
 def _state_layout(n: int) -> dict[str, slice]:
+    rows = 3 * IN_S_ROWS
     return {
         "x": slice(0, 3 * n),
         "P": slice(3 * n, 12 * n),
         "z": slice(12 * n, 13 * n),
-        "in_S": slice(13 * n, 13 * n + 12),
-        "consistency": slice(13 * n + 12, 13 * n + 18),
+        "in_S": slice(13 * n, 13 * n + rows),
+        "consistency": slice(13 * n + rows, 13 * n + rows + 6),
     }
 
 
@@ -220,7 +226,7 @@ class KernelKalmanBank:
         self.x = self.state[layout["x"]].reshape(n, 3)
         self._P = self.state[layout["P"]].reshape(n, 3, 3)
         self.z = self.state[layout["z"]]
-        self.in_S = self.state[layout["in_S"]].reshape(4, 3)
+        self.in_S = self.state[layout["in_S"]].reshape(IN_S_ROWS, 3)
         self.consistency_state = self.state[layout["consistency"]]
 
     # A copy (pickle, deepcopy: an FMU's state) would turn the views into arrays of their own:
@@ -384,10 +390,11 @@ compile in a running loop."""
 )
 def _estimator_tick(S, C, R_BS, t, code, in_B):  # pragma: no cover - compiled
     """The bank's tick (`_predict_correct`: axes lo..hi-1 corrected, code = lo + 16 hi + 256 check),
-    the filtered forces into in_S (rows F_hand, τ_hand, F_probe = R_SP F_P, in S; the fourth row,
-    the held measurement, is the caller's), the consistency check if asked, and the four rows turned
-    into B: row_B = row_S R_BSᵀ (R_BS row by row, 9 values), written into `in_B` (4, 3): a new
-    array made by the caller (a compiled function's own new array costs twice as much to return)."""
+    the filtered forces into in_S (rows F_hand, τ_hand, F_probe = R_SP F_P, in S; the other rows
+    (`IN_S_ROWS`) are the caller's), the consistency check if asked, every row turned into B:
+    row_B = row_S R_BSᵀ (R_BS row by row, 9 values), and in the last row of `in_B` the contact's
+    moment about R, p_RT_B × F_probe_B. `in_B` (IN_S_ROWS + 1, 3) is a new array made by the caller
+    (a compiled function's own new array costs twice as much to return)."""
     lo, hi, check = code % 16, (code // 16) % 16, code >= 256
     _predict_correct(S, C, lo, hi)
     n = int(C[0])
@@ -399,12 +406,19 @@ def _estimator_tick(S, C, R_BS, t, code, in_B):  # pragma: no cover - compiled
     f0, f1, f2 = S[18], S[21], S[24]
     for i in range(3):
         S[at + 6 + i] = R_SP[3 * i] * f0 + R_SP[3 * i + 1] * f1 + R_SP[3 * i + 2] * f2
+    rows = in_B.shape[0] - 1
     if check:
-        _consistency_at(S[at + 12 : at + 18], C[19 + n : 27 + n], t, S[at : at + 9])
-    for k in range(4):
+        at_c = at + 3 * rows
+        _consistency_at(S[at_c : at_c + 6], C[19 + n : 27 + n], t, S[at : at + 9])
+    for k in range(rows):
         s0, s1, s2 = S[at + 3 * k], S[at + 3 * k + 1], S[at + 3 * k + 2]
         for i in range(3):
             in_B[k, i] = R_BS[3 * i] * s0 + R_BS[3 * i + 1] * s1 + R_BS[3 * i + 2] * s2
+    r0, r1, r2 = in_B[5, 0], in_B[5, 1], in_B[5, 2]  # p_RT_B
+    f0, f1, f2 = in_B[2, 0], in_B[2, 1], in_B[2, 2]  # F_probe_B
+    in_B[rows, 0] = r1 * f2 - r2 * f1
+    in_B[rows, 1] = r2 * f0 - r0 * f2
+    in_B[rows, 2] = r0 * f1 - r1 * f0
 
 
 def estimator_tick(
@@ -416,8 +430,9 @@ def estimator_tick(
     t: float,
     check: bool,
 ) -> Vec:
-    """One ready tick of the estimator's arithmetic in one compiled call; the four rows of the
-    bank's `in_S` in B, a new (4, 3) array. `ft_z`: the compensated wrench (6) of a new FT-150
+    """One ready tick of the estimator's arithmetic in one compiled call; the rows of the bank's
+    `in_S` in B and then the contact's moment about R (p_RT_B × F_probe_B), a new array of
+    `IN_S_ROWS` + 1 rows. `ft_z`: the compensated wrench (6) of a new FT-150
     packet or None; `probe_z`: the corrected force (3) of a new probe packet or None; `check`: step
     the consistency check (attached to the bank). A bank of three channels (9 axes)."""
     if dt != bank._dt:
@@ -430,7 +445,7 @@ def estimator_tick(
         bank.z[6:9] = probe_z
         lo, hi = min(lo, 6), 9
     code = lo + 16 * hi
-    in_B = np.empty((4, 3))
+    in_B = np.empty((IN_S_ROWS + 1, 3))
     _estimator_tick(bank.state, bank.constants, R_BS, t, code + 256 * check, in_B)
     return in_B
 
