@@ -135,16 +135,23 @@ class _PacketSensor:
         raise NotImplementedError
 
     def _hold_initial(self) -> None:
-        """The outputs before the first packet: zeros, counter 0."""
+        """The outputs before the first packet: zeros, counter 0 (after the clock's reset)."""
         self._held = {self.value_port: np.zeros(self.size), "counter": np.array([0.0])}
+        self._idle()
+
+    def _idle(self) -> None:
+        """`idle_until` (the block contract): a step ending before the clock's next packet is
+        sampled or delivered, less its tolerance, does nothing and returns the held outputs."""
+        self.idle_until = self.clock.next_due_s - self.clock.eps
 
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
-        clock = self.clock
-        if t + dt + clock.eps < clock.next_due_s:  # no packet sampled or delivered in this step
+        if t + dt < self.idle_until:  # no packet sampled or delivered in this step
             return self._held
+        clock = self.clock
         true = inputs[self.true_port]
         delivered = clock.delivered
         clock.advance(t + dt, lambda: self._measure(true), lost=not self.params.connected)
+        self._idle()
         if delivered != clock.delivered:
             # new arrays only when a packet arrives: between packets the held ones are returned.
             # A packet's array is made by `_measure` for it alone and never changed: no copy.

@@ -15,6 +15,11 @@ sampled system, and ten steps of 1 ms are not one of 10 ms. A block whose `step`
 result for one step as for many shorter ones with the inputs held (it runs its own inner cycles and
 integrates at its own rate) sets `variable_step = True`; its FMU then says
 canHandleVariableCommunicationStepSize, and the others refuse a step that differs from their first.
+
+A block that knows it will idle may keep a float attribute `idle_until` [s]: a step from t to t + dt
+with t + dt < idle_until neither reads the inputs nor changes anything, and returns the same
+outputs as the last step (the packet sensors between packets). The in-process master then does not
+call it for such a step; any other caller may, with the same result.
 """
 
 from __future__ import annotations

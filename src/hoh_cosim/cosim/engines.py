@@ -133,10 +133,12 @@ def _runs(
 
 def _inline(rt: Runtime) -> tuple[Any, ...]:
     """What the master needs to run an in-process runtime's `step` inline (the block's step, its
-    input views, its output views and the arrays copied there last); Nones for any other."""
+    input views, its output views, the arrays copied there last, and the block if it keeps
+    `idle_until`: the block contract); Nones for any other."""
     if type(rt) is InProcessRuntime:
-        return rt.block.step, rt._inputs, rt._out_views, rt._written
-    return None, None, None, None
+        idles = rt.block if hasattr(rt.block, "idle_until") else None
+        return rt.block.step, rt._inputs, rt._out_views, rt._written, idles
+    return None, None, None, None, None
 
 
 def _slices(ports: Sequence[Any]) -> list[tuple[str, slice]]:
@@ -551,7 +553,10 @@ def _run(
                 inputs,
                 views,
                 written,
+                idles,
             ) in plan[k % cycle]:
+                if idles is not None and t + step < idles.idle_until:
+                    continue  # the step would do nothing (the block contract): not called
                 if copies is None:
                     take(index, out=buf)
                 else:
