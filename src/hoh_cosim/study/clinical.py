@@ -226,11 +226,12 @@ the passivity observer and controller."""
 HOLD_ON_RELEASE = (
     "controller.release.enabled=true",
     "controller.hold.enabled=true",
-    "controller.hold.force_source=combined",
+    "controller.hold.force_source=wrist",
 )
 """Hold-on-release (`hoh_cosim.control.hold`) on today's defaults, with the release detection that
-tells it the hand let go, regulating the wrist's force plus the hand's share told by the probe
-sensor (`force_source` combined: docs/decisions.md, "Hold-on-release")."""
+tells it the hand let go, regulating the wrist sensor's force (`force_source` wrist, as on the
+robot). The combined force, better on three operators' quick runs, was worse over the full
+study's twenty on every count but the press's jitter: docs/decisions.md, "Hold-on-release"."""
 
 
 @dataclass(frozen=True)
