@@ -6,12 +6,21 @@ from __future__ import annotations
 import csv
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from hoh_cosim.cli import main
-from hoh_cosim.study.clinical import ASSISTED, FREEHAND, HOLD, MODES, TASKS, study_variants
+from hoh_cosim.study.clinical import (
+    ASSISTED,
+    FREEHAND,
+    HOLD,
+    MODES,
+    TASKS,
+    _shared_modes,
+    study_variants,
+)
 
 # one worker runs this module (tests/xdist_groups.py): the study runs once
 pytestmark = pytest.mark.xdist_group(__name__)
@@ -89,6 +98,30 @@ def test_every_operator_does_every_task_in_every_mode(study) -> None:
             assert r["task_time_s"] != "", (r["task"], r["mode"])
     with (out / "operators.csv").open() as f:
         assert len(list(csv.DictReader(f))) == OPERATORS
+
+
+def test_modes_that_run_the_same_are_run_once_and_reported_under_each(study) -> None:
+    """Today's defaults are the seed's law: every component's parameters equal, so each of their
+    runs is the seed mode's, run once; a mode that differs anywhere is run on its own."""
+    _, out = study
+    shared = _shared_modes(SCENARIOS)
+    assert shared == {"defaults": "seed"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert [tuple(pair) for pair in summary["equal_laws"]] == [("seed", "defaults")]
+    with (out / "runs.csv").open() as f:
+        rows = {(r["operator"], r["task"], r["mode"]): r for r in csv.DictReader(f)}
+    for (operator, task, mode), row in rows.items():
+        if mode == "defaults":
+            seed = rows[(operator, task, "seed")]
+            assert {k: v for k, v in row.items() if k not in ("run", "mode")} == {
+                k: v for k, v in seed.items() if k not in ("run", "mode")
+            }
+    # a mode that changes one parameter of one component is its own
+    changed = (*MODES["defaults"].overrides, "operator.tremor_hz=9.5")
+    assert not _shared_modes(
+        SCENARIOS,
+        {"seed": MODES["seed"], "defaults": replace(MODES["defaults"], overrides=changed)},
+    )
 
 
 def test_the_summary_pairs_each_assisted_mode_with_freehand(study) -> None:

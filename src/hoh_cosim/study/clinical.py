@@ -37,7 +37,7 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -462,6 +462,35 @@ def _needed(scenarios: Path) -> None:
             )
 
 
+def _shared_modes(scenarios: Path, modes: Mapping[str, Mode] | None = None) -> dict[str, str]:
+    """{mode: an earlier mode whose runs are the same}: the same scenario file, the same hand (it
+    lets go or not) and every component's parameters equal, so that each of its runs, with the same
+    operator, task and seed, is the earlier mode's run to the bit. Such runs are run once and
+    reported under both modes."""
+    from hoh_cosim.cosim.scenario import load_scenario
+    from hoh_cosim.params import leaves
+
+    def runs(mode: Mode) -> tuple[Any, ...]:
+        s = load_scenario(scenarios / mode.scenario, mode.overrides)
+        every = [
+            (name, leaf.name, leaf.value)
+            for name, component in s.components.items()
+            for leaf in leaves(component.params)
+        ]
+        return (mode.scenario, mode.lets_go, every)
+
+    shared: dict[str, str] = {}
+    seen: list[tuple[str, tuple[Any, ...]]] = []
+    for name, mode in (MODES if modes is None else modes).items():
+        mine = runs(mode)
+        earlier = next((other for other, theirs in seen if theirs == mine), None)
+        if earlier is None:
+            seen.append((name, mine))
+        else:
+            shared[name] = earlier
+    return shared
+
+
 def _same_law(scenarios: Path, a: Mode, b: Mode) -> bool:
     """Whether two assisted modes give the controller and the estimator the same parameters."""
     from hoh_cosim.cosim.scenario import load_scenario
@@ -502,14 +531,20 @@ def run_clinical(
     _needed(scenarios)
     started = time.perf_counter()
     keyed = study_variants(scenarios, n, seed, quick)
-    outcomes = run_variants(
-        [v for _, v in keyed],
+    shared = _shared_modes(scenarios)
+    todo = [(key, v) for key, v in keyed if key[2] not in shared]
+    ran = run_variants(
+        [v for _, v in todo],
         workers=workers,
         scheduler=scheduler,
         progress=progress,
         label="clinical",
     )
-    got = {key: o for (key, _), o in zip(keyed, outcomes, strict=True)}
+    got = {key: o for (key, _), o in zip(todo, ran, strict=True)}
+    for key, variant in keyed:  # a shared mode's rows: the earlier mode's run, under its own name
+        if key[2] in shared:
+            got[key] = replace(got[(key[0], key[1], shared[key[2]])], variant=variant)
+    outcomes = [got[key] for key, _ in keyed]
     equal_laws = [
         (a, b)
         for i, a in enumerate(ASSISTED)
@@ -894,7 +929,8 @@ def _sections(
         intro.text.append(
             f"'{MODES[a].label}' and '{MODES[b].label}' give the controller and the estimator the "
             "same parameters today (the defaults are the seed's law), so their numbers are the "
-            "same; both stay so that a change of the defaults shows against the seed."
+            "same (each such run is run once and reported under both); both stay so that a "
+            "change of the defaults shows against the seed."
         )
     if summary["quick"] or n < FULL_OPERATORS:
         intro.text.append(
