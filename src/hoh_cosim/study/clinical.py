@@ -462,27 +462,28 @@ def _needed(scenarios: Path) -> None:
             )
 
 
+def _parameters(scenarios: Path, mode: Mode) -> list[tuple[str, str, list[tuple[str, Any]]]]:
+    """Every component of `mode`'s scenario under its overrides: (name, kind, its parameters as
+    (leaf, value) pairs), in the file's order."""
+    from hoh_cosim.cosim.scenario import load_scenario
+    from hoh_cosim.params import leaves
+
+    s = load_scenario(scenarios / mode.scenario, mode.overrides)
+    return [
+        (name, c.kind.name, [(leaf.name, leaf.value) for leaf in leaves(c.params)])
+        for name, c in s.components.items()
+    ]
+
+
 def _shared_modes(scenarios: Path, modes: Mapping[str, Mode] | None = None) -> dict[str, str]:
     """{mode: an earlier mode whose runs are the same}: the same scenario file, the same hand (it
     lets go or not) and every component's parameters equal, so that each of its runs, with the same
     operator, task and seed, is the earlier mode's run to the bit. Such runs are run once and
     reported under both modes."""
-    from hoh_cosim.cosim.scenario import load_scenario
-    from hoh_cosim.params import leaves
-
-    def runs(mode: Mode) -> tuple[Any, ...]:
-        s = load_scenario(scenarios / mode.scenario, mode.overrides)
-        every = [
-            (name, leaf.name, leaf.value)
-            for name, component in s.components.items()
-            for leaf in leaves(component.params)
-        ]
-        return (mode.scenario, mode.lets_go, every)
-
     shared: dict[str, str] = {}
     seen: list[tuple[str, tuple[Any, ...]]] = []
     for name, mode in (MODES if modes is None else modes).items():
-        mine = runs(mode)
+        mine = (mode.scenario, mode.lets_go, _parameters(scenarios, mode))
         earlier = next((other for other, theirs in seen if theirs == mine), None)
         if earlier is None:
             seen.append((name, mine))
@@ -493,15 +494,12 @@ def _shared_modes(scenarios: Path, modes: Mapping[str, Mode] | None = None) -> d
 
 def _same_law(scenarios: Path, a: Mode, b: Mode) -> bool:
     """Whether two assisted modes give the controller and the estimator the same parameters."""
-    from hoh_cosim.cosim.scenario import load_scenario
-    from hoh_cosim.params import leaves
 
-    def law(mode: Mode) -> list[tuple[str, Any]]:
-        s = load_scenario(scenarios / mode.scenario, mode.overrides)
+    def law(mode: Mode) -> list[tuple[str, list[tuple[str, Any]]]]:
+        components = _parameters(scenarios, mode)
         return [
-            (f"{kind}.{leaf.name}", leaf.value)
+            next((kind, values) for _, k, values in components if k == kind)
             for kind in ("controller", "estimator")
-            for leaf in leaves(s.component_of_kind(kind).params)
         ]
 
     return law(a) == law(b)
