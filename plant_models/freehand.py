@@ -59,6 +59,7 @@ from hoh_cosim.control.vectors import (
     cross3,
     frozen,
 )
+from plant_models.kernels import freehand_constants, freehand_step, kernels_enabled
 from plant_models.tissue import PhantomParams, contact_force, surface_depth
 from plant_models.tool import ToolModel
 
@@ -69,6 +70,15 @@ HOME_TIP_B = frozen([-0.10, -0.45, 0.25])
 HOME_R_BT = frozen([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 """The UR5 plant's tip orientation at home: the probe pointing down."""
 _STILL = frozen([0.0])
+_OUTPUTS = (
+    ("p_BT_B", slice(0, 3)),
+    ("R_BT", slice(3, 12)),
+    ("twist_B", slice(12, 18)),
+    ("F_contact_B", slice(18, 21)),
+    ("penetration", slice(21, 22)),
+    ("tau_grip_B", slice(22, 25)),
+)
+"""Where each output sits in the compiled step's array (`plant_models.kernels.freehand_step`)."""
 
 
 @dataclass(frozen=True)
@@ -140,8 +150,37 @@ class FreehandProbe:
 
     def __init__(self, params: FreehandParams | None = None) -> None:
         self.params = params or FreehandParams()
+        # the substeps compiled (plant_models.kernels.freehand_step), or this class's pure ones,
+        # which stay the reference (tests compare the two to 1e-12)
+        self._compiled = kernels_enabled()
+        self._x = np.zeros(18)  # the state: [p_C; R row by row; v_C; ω], in B
         self._derive()
         self.reset()
+
+    # the pure path's views of the state (each assignment writes into it)
+    @property
+    def _p_C(self) -> Vec3:
+        return self._x[0:3]
+
+    @_p_C.setter
+    def _p_C(self, value: Vec3) -> None:
+        self._x[0:3] = value
+
+    @property
+    def _R(self) -> Rot3:
+        return self._x[3:12].reshape(3, 3)
+
+    @_R.setter
+    def _R(self, value: Rot3) -> None:
+        self._x[3:12] = value.reshape(9)
+
+    @property
+    def _u(self) -> Vec:
+        return self._x[12:18]
+
+    @_u.setter
+    def _u(self, value: Vec) -> None:
+        self._x[12:18] = value
 
     def _derive(self) -> None:
         p = self.params
@@ -162,6 +201,7 @@ class FreehandProbe:
         self._J = np.hstack([np.eye(3), np.zeros((3, 3))])
         self._C = np.zeros((6, 6))
         self._K = np.zeros((6, 6))
+        self._constants = freehand_constants(p, self) if self._compiled else None
 
     def retune(self, params: FreehandParams) -> None:
         """New parameters while running (only the phantom may change)."""
@@ -174,9 +214,18 @@ class FreehandProbe:
         self._p_C = p.p_BT0_B - self._R @ self._r_CT_S
         self._u = np.zeros(6)  # [v_C; ω] in B
         self._gripped = False
-        self._outputs = self._evaluate(
-            np.zeros(3), np.zeros(3), np.zeros(3), 0.0, 0.0, jacobians=False
-        )[0]
+        if self._constants is not None:
+            self._outputs = self._unpack(
+                freehand_step(self._constants, self._x, np.zeros(12), 0, 0)
+            )
+        else:
+            self._outputs = self._evaluate(
+                np.zeros(3), np.zeros(3), np.zeros(3), 0.0, 0.0, jacobians=False
+            )[0]
+
+    @staticmethod
+    def _unpack(out: Vec) -> dict[str, Vec]:
+        return {name: out[at] for name, at in _OUTPUTS}
 
     def initial_outputs(self) -> dict[str, Vec]:
         return self._outputs
@@ -252,6 +301,14 @@ class FreehandProbe:
         self._gripped = float(inputs.get("hand_on", _STILL)[0]) > 0.5
         n = max(1, math.ceil(dt / self.params.substep_s - 1e-9))
         h = dt / n
+        if self._constants is not None:
+            packed = np.empty(12)
+            packed[0:3] = F_hand
+            packed[3:6] = tau_hand
+            packed[6:9] = F_tip
+            packed[9:] = offset, offset_rate, 1.0 if self._gripped else 0.0
+            self._outputs = self._unpack(freehand_step(self._constants, self._x, packed, n, h))
+            return self._outputs
         M = self._M
         for _ in range(n):
             _, f, C, K = self._evaluate(

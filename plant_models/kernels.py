@@ -542,3 +542,273 @@ def arm_advance(state: np.ndarray, qdd: np.ndarray, ramp: float, dt: float) -> n
     out = np.empty(18)
     _advance(state, qdd, ramp, dt, out)
     return out
+
+
+# --- the freehand probe (plant_models.freehand) -------------------------------------------------
+
+FREEHAND_SHAPES = {"plane": 0.0, "ellipsoid": 1.0, "none": 2.0}
+"""The phantom's shape as `freehand_constants` codes it."""
+
+
+def freehand_constants(params: object, derived: object) -> np.ndarray:
+    """`_freehand_step`'s constants (52 values) from `FreehandParams` and the probe's derived
+    quantities (`FreehandProbe`): m, the inertia's diagonal in S, r_CH and r_CT in S, R_BS0 row by
+    row, the weight, the grip's K_r and D_r, R_ST row by row, then the phantom: its shape's code,
+    the plane's point and normal, the ellipsoid's centre and axes, k, n, c, μ, b, v_s."""
+    ph = params.phantom  # type: ignore[attr-defined]
+    d = derived
+    return np.array(
+        [
+            d._m,  # type: ignore[attr-defined]
+            *np.diag(d._I_S).tolist(),  # type: ignore[attr-defined]
+            *d._r_CH_S.tolist(),  # type: ignore[attr-defined]
+            *d._r_CT_S.tolist(),  # type: ignore[attr-defined]
+            *d._R_BS0.ravel().tolist(),  # type: ignore[attr-defined]
+            *d._weight.tolist(),  # type: ignore[attr-defined]
+            params.grip_stiffness,  # type: ignore[attr-defined]
+            params.grip_damping,  # type: ignore[attr-defined]
+            *d._R_ST.ravel().tolist(),  # type: ignore[attr-defined]
+            FREEHAND_SHAPES[ph.shape],
+            *ph.plane_point_B.tolist(),
+            *ph.plane_normal_B.tolist(),
+            *ph.ellipsoid_center_B.tolist(),
+            *ph.ellipsoid_axes.tolist(),
+            ph.stiffness,
+            ph.exponent,
+            ph.damping,
+            ph.friction,
+            ph.viscous_friction,
+            ph.stiction_velocity,
+        ]
+    )
+
+
+@njit(cache=True, nogil=True)
+def _freehand_forces(P, x, inp, out, f, M, C, K, jac):  # pragma: no cover - compiled
+    """`FreehandProbe._evaluate` on the state x = [p_C; R row by row; v; ω]: the outputs into
+    `out` (p_T, R_BT, twist, F_contact, penetration, τ_grip), the generalised force into f, and
+    with `jac` the mass matrix M and the Jacobians C = -∂f/∂u, K = -∂f/∂x."""
+    R = x[3:12]
+    v0, v1, v2 = x[12], x[13], x[14]
+    w0, w1, w2 = x[15], x[16], x[17]
+    # r_CT, r_CH in B; the tip's position and velocity
+    rt0 = R[0] * P[7] + R[1] * P[8] + R[2] * P[9]
+    rt1 = R[3] * P[7] + R[4] * P[8] + R[5] * P[9]
+    rt2 = R[6] * P[7] + R[7] * P[8] + R[8] * P[9]
+    rh0 = R[0] * P[4] + R[1] * P[5] + R[2] * P[6]
+    rh1 = R[3] * P[4] + R[4] * P[5] + R[5] * P[6]
+    rh2 = R[6] * P[4] + R[7] * P[5] + R[8] * P[6]
+    p0, p1, p2 = x[0] + rt0, x[1] + rt1, x[2] + rt2
+    c0, c1, c2 = _cross(w0, w1, w2, rt0, rt1, rt2)
+    vt0, vt1, vt2 = v0 + c0, v1 + c1, v2 + c2
+    # the surface (tissue.surface_depth) and the contact (tissue.contact_force)
+    shape = P[33]
+    n0, n1, n2 = 0.0, 0.0, 1.0
+    if shape == 0.0:
+        n0, n1, n2 = P[37], P[38], P[39]
+        depth = (P[34] - p0) * n0 + (P[35] - p1) * n1 + (P[36] - p2) * n2
+    elif shape == 1.0:
+        u0 = (p0 - P[40]) / P[43]
+        u1 = (p1 - P[41]) / P[44]
+        u2 = (p2 - P[42]) / P[45]
+        fe = u0 * u0 + u1 * u1 + u2 * u2 - 1.0
+        g0, g1, g2 = 2.0 * u0 / P[43], 2.0 * u1 / P[44], 2.0 * u2 / P[45]
+        g = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        if g == 0.0:
+            depth = min(P[43], P[44], P[45])
+        else:
+            depth = -fe / g
+            n0, n1, n2 = g0 / g, g1 / g, g2 / g
+    else:
+        depth = -np.inf
+    depth += inp[9]
+    k, e, c = P[46], P[47], P[48]
+    fc0 = fc1 = fc2 = 0.0
+    v_n = vt0 * n0 + vt1 * n1 + vt2 * n2
+    depth_rate = -v_n + inp[10]
+    t0, t1, t2 = vt0 - v_n * n0, vt1 - v_n * n1, vt2 - v_n * n2
+    speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    spring = 0.0
+    F_n = 0.0
+    if depth > 0.0:
+        spring = k * depth**e
+        F_n = max(0.0, spring * (1.0 + 1.5 * c * depth_rate))
+        fc0, fc1, fc2 = F_n * n0, F_n * n1, F_n * n2
+        if speed > 0.0:
+            fr = P[49] * F_n * np.tanh(speed / P[51])
+            cc = fr / speed + P[50]
+            fc0, fc1, fc2 = fc0 - cc * t0, fc1 - cc * t1, fc2 - cc * t2
+    ft0, ft1, ft2 = fc0 + inp[6], fc1 + inp[7], fc2 + inp[8]
+    # the grip: -K_r θ - D_r ω + r_CH × m g, θ = log(R R_BS0ᵀ)
+    gripped = inp[11] > 0.5
+    tg0 = tg1 = tg2 = 0.0
+    if gripped:
+        A = np.empty(9)
+        for i in range(3):
+            for j in range(3):
+                A[3 * i + j] = (
+                    R[3 * i] * P[10 + 3 * j]
+                    + R[3 * i + 1] * P[11 + 3 * j]
+                    + R[3 * i + 2] * P[12 + 3 * j]
+                )
+        a0, a1, a2 = 0.5 * (A[7] - A[5]), 0.5 * (A[2] - A[6]), 0.5 * (A[3] - A[1])
+        s = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        if s >= 1e-12:
+            scale = np.arctan2(s, 0.5 * (A[0] + A[4] + A[8] - 1.0)) / s
+            a0, a1, a2 = scale * a0, scale * a1, scale * a2
+        m0, m1, m2 = _cross(rh0, rh1, rh2, P[19], P[20], P[21])
+        Kr, Dr = P[22], P[23]
+        tg0 = -Kr * a0 - Dr * w0 + m0
+        tg1 = -Kr * a1 - Dr * w1 + m1
+        tg2 = -Kr * a2 - Dr * w2 + m2
+    # I_B = R I_S Rᵀ and I_B ω
+    I_B = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            I_B[i, j] = (
+                R[3 * i] * P[1] * R[3 * j]
+                + R[3 * i + 1] * P[2] * R[3 * j + 1]
+                + R[3 * i + 2] * P[3] * R[3 * j + 2]
+            )
+    iw0 = I_B[0, 0] * w0 + I_B[0, 1] * w1 + I_B[0, 2] * w2
+    iw1 = I_B[1, 0] * w0 + I_B[1, 1] * w1 + I_B[1, 2] * w2
+    iw2 = I_B[2, 0] * w0 + I_B[2, 1] * w1 + I_B[2, 2] * w2
+    F = inp[0:3]
+    f[0] = F[0] + ft0 + P[19]
+    f[1] = F[1] + ft1 + P[20]
+    f[2] = F[2] + ft2 + P[21]
+    h0, h1, h2 = _cross(rh0, rh1, rh2, F[0], F[1], F[2])
+    q0, q1, q2 = _cross(rt0, rt1, rt2, ft0, ft1, ft2)
+    y0, y1, y2 = _cross(w0, w1, w2, iw0, iw1, iw2)
+    f[3] = inp[3] + tg0 + h0 + q0 - y0
+    f[4] = inp[4] + tg1 + h1 + q1 - y1
+    f[5] = inp[5] + tg2 + h2 + q2 - y2
+    # the outputs
+    out[0], out[1], out[2] = p0, p1, p2
+    for i in range(3):
+        for j in range(3):
+            out[3 + 3 * i + j] = (
+                R[3 * i] * P[24 + j] + R[3 * i + 1] * P[27 + j] + R[3 * i + 2] * P[30 + j]
+            )
+    out[12], out[13], out[14] = vt0, vt1, vt2
+    out[15], out[16], out[17] = w0, w1, w2
+    out[18], out[19], out[20] = fc0, fc1, fc2
+    out[21] = depth if np.isfinite(depth) else -1.0
+    out[22], out[23], out[24] = tg0, tg1, tg2
+    if not jac:
+        return
+    M[3:, 3:] = I_B
+    C[:, :] = 0.0
+    K[:, :] = 0.0
+    if depth > 0.0:
+        F_n = spring * (1.0 + 1.5 * c * depth_rate)
+        if F_n > 0.0:
+            nv = np.array([n0, n1, n2])
+            CT = np.empty((3, 3))
+            KT = np.empty((3, 3))
+            kn = e * k * depth ** (e - 1.0) * (1.0 + 1.5 * c * depth_rate)
+            cn = 1.5 * c * spring
+            for i in range(3):
+                for j in range(3):
+                    nn = nv[i] * nv[j]
+                    CT[i, j] = cn * nn
+                    KT[i, j] = kn * nn
+            # the friction's linearisation across the normal
+            mu_F, v_s, b = P[49] * F_n, P[51], P[50]
+            if speed > 1e-9 * v_s:
+                th = np.tanh(speed / v_s)
+                gf = mu_F * th / speed + b
+                sgp = mu_F * ((1.0 - th * th) / v_s - th / speed)
+                tv = np.array([t0 / speed, t1 / speed, t2 / speed])
+                for i in range(3):
+                    for j in range(3):
+                        proj = (1.0 if i == j else 0.0) - nv[i] * nv[j]
+                        CT[i, j] = CT[i, j] + gf * proj + sgp * tv[i] * tv[j]
+            else:
+                gf = mu_F / v_s + b
+                for i in range(3):
+                    for j in range(3):
+                        proj = (1.0 if i == j else 0.0) - nv[i] * nv[j]
+                        CT[i, j] = CT[i, j] + gf * proj
+            # v_T = J u, J = [I, -[r_CT]×]: C = Jᵀ C_T J, K = Jᵀ K_T J
+            J = np.zeros((3, 6))
+            J[0, 0] = J[1, 1] = J[2, 2] = 1.0
+            J[0, 4], J[0, 5] = rt2, -rt1
+            J[1, 3], J[1, 5] = -rt2, rt0
+            J[2, 3], J[2, 4] = rt1, -rt0
+            for T, G in ((CT, C), (KT, K)):
+                TJ = np.empty((3, 6))
+                for i in range(3):
+                    for j in range(6):
+                        TJ[i, j] = T[i, 0] * J[0, j] + T[i, 1] * J[1, j] + T[i, 2] * J[2, j]
+                for i in range(6):
+                    for j in range(6):
+                        G[i, j] = J[0, i] * TJ[0, j] + J[1, i] * TJ[1, j] + J[2, i] * TJ[2, j]
+    if gripped:
+        for i in range(3, 6):
+            C[i, i] += P[23]
+            K[i, i] += P[22]
+
+
+@njit(cache=True, nogil=True)
+def _freehand_step(P, x, inp, n, h, out):  # pragma: no cover - compiled
+    """`FreehandProbe.step`'s n linearly implicit Euler substeps of h on the state x (in place),
+    then the outputs into `out`: (M + h C + h² K) u₁ = (M + h C) u₀ + h f, x₁ = x₀ + h u₁ with
+    R₁ = exp(h [ω₁]×) R₀ made orthonormal by one Newton step."""
+    f = np.empty(6)
+    M = np.zeros((6, 6))
+    M[0, 0] = M[1, 1] = M[2, 2] = P[0]
+    C = np.empty((6, 6))
+    K = np.empty((6, 6))
+    A = np.empty((6, 6))
+    rhs = np.empty(6)
+    E = np.empty((3, 3))
+    Rn = np.empty((3, 3))
+    hh = h * h
+    for _ in range(n):
+        _freehand_forces(P, x, inp, out, f, M, C, K, True)
+        for i in range(6):
+            total = 0.0
+            for j in range(6):
+                mc = M[i, j] + h * C[i, j]
+                A[i, j] = mc + hh * K[i, j]
+                total += mc * x[12 + j]
+            rhs[i] = total + h * f[i]
+        u = _solve(A, rhs)
+        for i in range(6):
+            x[12 + i] = u[i]
+        for i in range(3):
+            x[i] = x[i] + h * u[i]
+        # exp(h ω) (Rodrigues) times R, then R (3 I - Rᵀ R) / 2
+        rx, ry, rz = h * u[3], h * u[4], h * u[5]
+        theta2 = rx * rx + ry * ry + rz * rz
+        if theta2 < 1e-12:
+            a, b = 1.0 - theta2 / 6.0, 0.5 - theta2 / 24.0
+        else:
+            theta = np.sqrt(theta2)
+            a, b = np.sin(theta) / theta, (1.0 - np.cos(theta)) / theta2
+        Sk = np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]])
+        for i in range(3):
+            for j in range(3):
+                sk2 = Sk[i, 0] * Sk[0, j] + Sk[i, 1] * Sk[1, j] + Sk[i, 2] * Sk[2, j]
+                E[i, j] = (1.0 if i == j else 0.0) + a * Sk[i, j] + b * sk2
+        for i in range(3):
+            for j in range(3):
+                Rn[i, j] = E[i, 0] * x[3 + j] + E[i, 1] * x[6 + j] + E[i, 2] * x[9 + j]
+        for i in range(3):
+            for j in range(3):
+                RtR = Rn[0, i] * Rn[0, j] + Rn[1, i] * Rn[1, j] + Rn[2, i] * Rn[2, j]
+                E[i, j] = (1.5 if i == j else 0.0) - 0.5 * RtR
+        for i in range(3):
+            for j in range(3):
+                x[3 + 3 * i + j] = Rn[i, 0] * E[0, j] + Rn[i, 1] * E[1, j] + Rn[i, 2] * E[2, j]
+    _freehand_forces(P, x, inp, out, f, M, C, K, False)
+
+
+def freehand_step(
+    constants: np.ndarray, state: np.ndarray, inputs: np.ndarray, n: int, h: float
+) -> np.ndarray:
+    """`_freehand_step` into a new output array (25 values; the state advanced in place)."""
+    out = np.empty(25)
+    _freehand_step(constants, state, inputs, n, h, out)
+    return out

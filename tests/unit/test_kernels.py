@@ -28,8 +28,10 @@ from hoh_cosim.control.release import ReleaseParams
 from hoh_cosim.control.supervisor import Status
 from hoh_cosim.control.variable_admittance import VariableAdmittance, VariableAdmittanceParams
 from hoh_cosim.errors import ConfigError
+from plant_models.freehand import FreehandParams, FreehandProbe
 from plant_models.kernels import KINEMATICS_LAYOUT, KernelUR5
 from plant_models.plant import Plant, PlantParams
+from plant_models.tissue import PhantomParams
 from plant_models.tool import CableDrag, ToolModel
 from tests.estimates import controller_inputs
 from tests.streams import SensorStream
@@ -293,6 +295,73 @@ def test_plant_matches_the_pinocchio_plant():
     name, worst = agree.worst()
     assert worst < REL, f"{name}: {worst:.3g}"
     assert agree.scale["qd"] > 0.01  # the arm moved
+
+
+FREEHAND_PHANTOMS = {
+    "plane": PhantomParams(plane_point_B=[0.0, 0.0, 0.245]),
+    "ellipsoid": PhantomParams(
+        shape="ellipsoid",
+        ellipsoid_center_B=[-0.05, -0.45, 0.145],
+        ellipsoid_axes=[0.17, 0.25, 0.1],
+    ),
+    "none": PhantomParams(shape="none"),
+}
+
+
+def _freehand_agreement(params: FreehandParams, *, wrong: float = 0.0) -> Agreement:
+    """Both freehand probes under the same hand (pressed in, slid, twisted, let go and gripped
+    again), on a breathing surface, with copies that carry on in place of the originals halfway;
+    `wrong` makes the compiled probe's phantom that much stiffer, relatively.
+
+    Each step starts the compiled probe from the pure one's state: the step is what is compiled.
+    Left to run on its own, the two part by more than 1e-12 within two seconds of this hand's
+    stick and slip, and so does the pure probe from itself started one rounding higher (checked:
+    at the same steps, by the same factors): the smoothed Coulomb friction's slope (μ F_n / v_s,
+    1600 N·s/m at 8 N) amplifies the last bit of a sum taken in another order."""
+    pure, compiled = _pure_and_compiled(lambda: FreehandProbe(params))
+    if wrong:
+        compiled._constants[46] *= 1.0 + wrong  # the phantom's k (kernels.freehand_constants)
+    rng = np.random.default_rng(8)
+    agree = Agreement()
+    force = np.zeros(3)
+    for k in range(2000):
+        t = k * 2e-3
+        if k % 10 == 0:
+            force = np.array([*rng.normal(0.0, 2.0, 2), -6.0 + rng.normal(0.0, 2.0)])
+        inputs = {
+            "F_hand_B": force - params.tool.mass_kg * params.g_B,
+            "tau_hand_B": rng.normal(0.0, 0.05, 3),
+            "F_tip_B": np.zeros(3) if k % 700 < 500 else rng.normal(0.0, 1.0, 3),
+            "surface_offset_m": np.array([0.01 * math.sin(1.6 * t)]),
+            "surface_rate_m_s": np.array([0.016 * math.cos(1.6 * t)]),
+            "hand_on": np.array([0.0 if 900 <= k < 960 else 1.0]),
+        }
+        if k == 1000:
+            pure, compiled = _copy_as_fmu_state(pure), _copy_as_fmu_state(compiled)
+        compiled._x[:] = pure._x
+        a, b = pure.step(t, 2e-3, inputs), compiled.step(t, 2e-3, inputs)
+        for name in a:
+            agree.add(name, a[name], b[name])
+    return agree
+
+
+@pytest.mark.parametrize("shape", sorted(FREEHAND_PHANTOMS))
+def test_freehand_probe_matches_the_pure_probe(shape):
+    """Every output of every step within 1e-12, on each shape of phantom, in contact and sliding
+    (the friction's both branches) and in the air, gripped and let go."""
+    agree = _freehand_agreement(FreehandParams(phantom=FREEHAND_PHANTOMS[shape]))
+    name, worst = agree.worst()
+    assert worst < REL, f"{name}: {worst:.3g}"
+    assert agree.scale["twist_B"] > 0.01  # the probe moved
+    if shape != "none":
+        assert agree.scale["F_contact_B"] > 1.0  # and pressed on the phantom
+
+
+def test_a_wrong_freehand_kernel_would_be_caught():
+    """The agreement test can fail: a compiled probe whose phantom is 1e-9 stiffer is told
+    apart."""
+    agree = _freehand_agreement(FreehandParams(phantom=FREEHAND_PHANTOMS["plane"]), wrong=1e-9)
+    assert agree.worst()[1] > 100 * REL
 
 
 def test_warm_up_is_idempotent():
