@@ -222,7 +222,7 @@ class KernelUR5:
         zero = np.zeros(self.nq)
         k = self.tool_kinematics(zero, zero, zero)
         self.jacobian(zero, "flange")
-        tool_loads(np.zeros(35), k, *(np.zeros(3),) * 3)
+        contact_loads(np.zeros(35), k, np.full(19, 2.0), *(np.zeros(3),) * 3, *(np.zeros(1),) * 2)
         if self.nq == 6:
             arm_cycle(self, "flange", np.zeros(18), *(np.zeros(6),) * 2, np.zeros(39), np.ones(8))
             arm_advance(np.zeros(18), np.zeros(6), 1e-3, 1e-3)
@@ -255,7 +255,7 @@ def loads_constants(tool: object, g_B: np.ndarray) -> np.ndarray:
     )
 
 
-@njit(types.void(_IN, _IN, _IN, _IN, _IN, _OUT), cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _loads(C, k, F_hand, tau_hand, F_contact, out):  # pragma: no cover - compiled
     """(wrench of the tool on the wrist sensor in S, force of the probe on the probe sensor in P)
     into `out` (9,), from the kinematics `k` (KINEMATICS_LAYOUT) and the loads in B:
@@ -328,16 +328,104 @@ def _loads(C, k, F_hand, tau_hand, F_contact, out):  # pragma: no cover - compil
         out[6 + i] = C[16 + 3 * i] * P0 + C[17 + 3 * i] * P1 + C[18 + 3 * i] * P2
 
 
-def tool_loads(
+# --- the phantom's contact (tissue.contact_force) -----------------------------------------------
+
+PHANTOM_SHAPES = {"plane": 0.0, "ellipsoid": 1.0, "none": 2.0}
+"""The phantom's shape as `phantom_constants` codes it."""
+
+
+def phantom_constants(phantom: object) -> np.ndarray:
+    """`_contact`'s constants (19 values) from `PhantomParams`: the shape's code, the plane's point
+    and normal, the ellipsoid's centre and axes, k, n, c, μ, b, v_s."""
+    ph = phantom
+    return np.array(
+        [
+            PHANTOM_SHAPES[ph.shape],  # type: ignore[attr-defined]
+            *ph.plane_point_B.tolist(),  # type: ignore[attr-defined]
+            *ph.plane_normal_B.tolist(),  # type: ignore[attr-defined]
+            *ph.ellipsoid_center_B.tolist(),  # type: ignore[attr-defined]
+            *ph.ellipsoid_axes.tolist(),  # type: ignore[attr-defined]
+            ph.stiffness,  # type: ignore[attr-defined]
+            ph.exponent,  # type: ignore[attr-defined]
+            ph.damping,  # type: ignore[attr-defined]
+            ph.friction,  # type: ignore[attr-defined]
+            ph.viscous_friction,  # type: ignore[attr-defined]
+            ph.stiction_velocity,  # type: ignore[attr-defined]
+        ]
+    )
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _contact(Ph, p0, p1, p2, v0, v1, v2, offset, rate):  # pragma: no cover - compiled
+    """`tissue.contact_force` of the phantom `Ph` (`phantom_constants`) on a tip at p moving at v,
+    the surface `offset` along its normal at `rate`: the force, the depth (with the offset), and
+    for the freehand probe's Jacobians the normal n, k δⁿ, δ̇, v's part across n and its size."""
+    shape = Ph[0]
+    n0, n1, n2 = 0.0, 0.0, 1.0
+    if shape == 0.0:
+        n0, n1, n2 = Ph[4], Ph[5], Ph[6]
+        depth = (Ph[1] - p0) * n0 + (Ph[2] - p1) * n1 + (Ph[3] - p2) * n2
+    elif shape == 1.0:
+        u0 = (p0 - Ph[7]) / Ph[10]
+        u1 = (p1 - Ph[8]) / Ph[11]
+        u2 = (p2 - Ph[9]) / Ph[12]
+        fe = u0 * u0 + u1 * u1 + u2 * u2 - 1.0
+        g0, g1, g2 = 2.0 * u0 / Ph[10], 2.0 * u1 / Ph[11], 2.0 * u2 / Ph[12]
+        g = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        if g == 0.0:  # at the centre: deepest; any direction
+            depth = min(Ph[10], Ph[11], Ph[12])
+        else:
+            depth = -fe / g
+            n0, n1, n2 = g0 / g, g1 / g, g2 / g
+    else:
+        depth = -np.inf
+    depth += offset
+    fc0 = fc1 = fc2 = 0.0
+    v_n = v0 * n0 + v1 * n1 + v2 * n2
+    depth_rate = -v_n + rate
+    t0, t1, t2 = v0 - v_n * n0, v1 - v_n * n1, v2 - v_n * n2
+    speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    spring = 0.0
+    if depth > 0.0:
+        spring = Ph[13] * depth ** Ph[14]
+        F_n = max(0.0, spring * (1.0 + 1.5 * Ph[15] * depth_rate))
+        fc0, fc1, fc2 = F_n * n0, F_n * n1, F_n * n2
+        if speed > 0.0:
+            c = Ph[16] * F_n * np.tanh(speed / Ph[18]) / speed + Ph[17]
+            fc0, fc1, fc2 = fc0 - c * t0, fc1 - c * t1, fc2 - c * t2
+    return fc0, fc1, fc2, depth, n0, n1, n2, spring, depth_rate, t0, t1, t2, speed
+
+
+@njit(types.void(_IN, _IN, _IN, _IN, _IN, _IN, _IN, _IN, _OUT), cache=True, nogil=True)
+def _contact_loads(C, k, Ph, F_hand, tau_hand, F_tip, offset, rate, out):  # pragma: no cover
+    """The plant's contact at the TCP (`_contact`) and the sensors' readings under it (`_loads`):
+    out = [wrench_S (6); force_P (3); F_contact_B (3); penetration, -1 out of reach]."""
+    fc0, fc1, fc2, depth = _contact(Ph, k[0], k[1], k[2], k[24], k[25], k[26], offset[0], rate[0])[
+        :4
+    ]
+    F = np.empty(3)
+    F[0], F[1], F[2] = fc0 + F_tip[0], fc1 + F_tip[1], fc2 + F_tip[2]
+    _loads(C, k, F_hand, tau_hand, F, out)
+    out[9], out[10], out[11] = fc0, fc1, fc2
+    out[12] = depth if np.isfinite(depth) else -1.0
+
+
+def contact_loads(
     constants: np.ndarray,
     kinematics: np.ndarray,
+    phantom: np.ndarray,
     F_hand_B: np.ndarray,
     tau_hand_B: np.ndarray,
-    F_contact_B: np.ndarray,
+    F_tip_B: np.ndarray,
+    offset: np.ndarray,
+    offset_rate: np.ndarray,
 ) -> np.ndarray:
-    """`ToolLoads.readings` compiled: [wrench_S; force_P], a new (9,) array (see `_loads`)."""
-    out = np.empty(9)
-    _loads(constants, kinematics, F_hand_B, tau_hand_B, F_contact_B, out)
+    """The plant's contact and the sensors' readings in one compiled call (`_contact_loads`): a
+    new (13,) array [wrench_S; force_P; F_contact_B; penetration]."""
+    out = np.empty(13)
+    _contact_loads(
+        constants, kinematics, phantom, F_hand_B, tau_hand_B, F_tip_B, offset, offset_rate, out
+    )
     return out
 
 
@@ -546,16 +634,12 @@ def arm_advance(state: np.ndarray, qdd: np.ndarray, ramp: float, dt: float) -> n
 
 # --- the freehand probe (plant_models.freehand) -------------------------------------------------
 
-FREEHAND_SHAPES = {"plane": 0.0, "ellipsoid": 1.0, "none": 2.0}
-"""The phantom's shape as `freehand_constants` codes it."""
-
 
 def freehand_constants(params: object, derived: object) -> np.ndarray:
     """`_freehand_step`'s constants (52 values) from `FreehandParams` and the probe's derived
     quantities (`FreehandProbe`): m, the inertia's diagonal in S, r_CH and r_CT in S, R_BS0 row by
-    row, the weight, the grip's K_r and D_r, R_ST row by row, then the phantom: its shape's code,
-    the plane's point and normal, the ellipsoid's centre and axes, k, n, c, μ, b, v_s."""
-    ph = params.phantom  # type: ignore[attr-defined]
+    row, the weight, the grip's K_r and D_r, R_ST row by row, then the phantom's 19
+    (`phantom_constants`)."""
     d = derived
     return np.array(
         [
@@ -568,17 +652,7 @@ def freehand_constants(params: object, derived: object) -> np.ndarray:
             params.grip_stiffness,  # type: ignore[attr-defined]
             params.grip_damping,  # type: ignore[attr-defined]
             *d._R_ST.ravel().tolist(),  # type: ignore[attr-defined]
-            FREEHAND_SHAPES[ph.shape],
-            *ph.plane_point_B.tolist(),
-            *ph.plane_normal_B.tolist(),
-            *ph.ellipsoid_center_B.tolist(),
-            *ph.ellipsoid_axes.tolist(),
-            ph.stiffness,
-            ph.exponent,
-            ph.damping,
-            ph.friction,
-            ph.viscous_friction,
-            ph.stiction_velocity,
+            *phantom_constants(params.phantom).tolist(),  # type: ignore[attr-defined]
         ]
     )
 
@@ -601,43 +675,11 @@ def _freehand_forces(P, x, inp, out, f, M, C, K, jac):  # pragma: no cover - com
     p0, p1, p2 = x[0] + rt0, x[1] + rt1, x[2] + rt2
     c0, c1, c2 = _cross(w0, w1, w2, rt0, rt1, rt2)
     vt0, vt1, vt2 = v0 + c0, v1 + c1, v2 + c2
-    # the surface (tissue.surface_depth) and the contact (tissue.contact_force)
-    shape = P[33]
-    n0, n1, n2 = 0.0, 0.0, 1.0
-    if shape == 0.0:
-        n0, n1, n2 = P[37], P[38], P[39]
-        depth = (P[34] - p0) * n0 + (P[35] - p1) * n1 + (P[36] - p2) * n2
-    elif shape == 1.0:
-        u0 = (p0 - P[40]) / P[43]
-        u1 = (p1 - P[41]) / P[44]
-        u2 = (p2 - P[42]) / P[45]
-        fe = u0 * u0 + u1 * u1 + u2 * u2 - 1.0
-        g0, g1, g2 = 2.0 * u0 / P[43], 2.0 * u1 / P[44], 2.0 * u2 / P[45]
-        g = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-        if g == 0.0:
-            depth = min(P[43], P[44], P[45])
-        else:
-            depth = -fe / g
-            n0, n1, n2 = g0 / g, g1 / g, g2 / g
-    else:
-        depth = -np.inf
-    depth += inp[9]
-    k, e, c = P[46], P[47], P[48]
-    fc0 = fc1 = fc2 = 0.0
-    v_n = vt0 * n0 + vt1 * n1 + vt2 * n2
-    depth_rate = -v_n + inp[10]
-    t0, t1, t2 = vt0 - v_n * n0, vt1 - v_n * n1, vt2 - v_n * n2
-    speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    spring = 0.0
-    F_n = 0.0
-    if depth > 0.0:
-        spring = k * depth**e
-        F_n = max(0.0, spring * (1.0 + 1.5 * c * depth_rate))
-        fc0, fc1, fc2 = F_n * n0, F_n * n1, F_n * n2
-        if speed > 0.0:
-            fr = P[49] * F_n * np.tanh(speed / P[51])
-            cc = fr / speed + P[50]
-            fc0, fc1, fc2 = fc0 - cc * t0, fc1 - cc * t1, fc2 - cc * t2
+    # the contact (tissue.contact_force)
+    Ph = P[33:]
+    fc0, fc1, fc2, depth, n0, n1, n2, spring, depth_rate, t0, t1, t2, speed = _contact(
+        Ph, p0, p1, p2, vt0, vt1, vt2, inp[9], inp[10]
+    )
     ft0, ft1, ft2 = fc0 + inp[6], fc1 + inp[7], fc2 + inp[8]
     # the grip: -K_r θ - D_r ω + r_CH × m g, θ = log(R R_BS0ᵀ)
     gripped = inp[11] > 0.5
@@ -701,6 +743,7 @@ def _freehand_forces(P, x, inp, out, f, M, C, K, jac):  # pragma: no cover - com
     C[:, :] = 0.0
     K[:, :] = 0.0
     if depth > 0.0:
+        k, e, c = Ph[13], Ph[14], Ph[15]
         F_n = spring * (1.0 + 1.5 * c * depth_rate)
         if F_n > 0.0:
             nv = np.array([n0, n1, n2])
@@ -714,7 +757,7 @@ def _freehand_forces(P, x, inp, out, f, M, C, K, jac):  # pragma: no cover - com
                     CT[i, j] = cn * nn
                     KT[i, j] = kn * nn
             # the friction's linearisation across the normal
-            mu_F, v_s, b = P[49] * F_n, P[51], P[50]
+            mu_F, v_s, b = Ph[16] * F_n, Ph[18], Ph[17]
             if speed > 1e-9 * v_s:
                 th = np.tanh(speed / v_s)
                 gf = mu_F * th / speed + b

@@ -25,7 +25,13 @@ import numpy as np
 from hoh_cosim.control.block import TWIST_UNITS, WRENCH_UNITS, Port
 from hoh_cosim.control.vectors import GRAVITY_B, Vec, Vec3, as_vector, frozen
 from plant_models.arm import ArmParams, SpeedLArm
-from plant_models.kernels import KernelUR5, kernels_enabled, loads_constants, tool_loads
+from plant_models.kernels import (
+    KernelUR5,
+    contact_loads,
+    kernels_enabled,
+    loads_constants,
+    phantom_constants,
+)
 from plant_models.tissue import PhantomParams, contact_force
 from plant_models.tool import ToolLoads, ToolModel
 from plant_models.ur5 import FramePlacement, UR5Model
@@ -123,6 +129,7 @@ class Plant:
         tool = self.params.tool
         self._p_SK_S = tool.cable.p_SK_S if tool.cable.enabled else None
         self._probe_mass = tool.probe_mass_kg > 0.0
+        self._phantom = phantom_constants(self.params.phantom)
         # what the last evaluation was of: the arm's state (bytes of `arm.state`) and the loads
         self._kinematics_at: tuple[bytes, tuple[Any, ...]] | None = None
         self._evaluated_at: tuple[bytes, ...] | None = None
@@ -222,16 +229,28 @@ class Plant:
             return dict(self._outputs)
         kinematics = self._kinematics(key[0])
         p_BT, R_BT, twist, p_BS, R_BS_rows, R_BS, a_C, omega, p_BK, a_P = kinematics
-        contact = contact_force(
-            self.params.phantom, p_BT, twist[:3], float(offset[0]), float(offset_rate[0])
-        )
         # a push on the tip loads both sensors as a contact does
-        if self._kernel is not None:  # ToolLoads.readings, compiled
-            loads = tool_loads(
-                self._loads_constants, self._k, F_hand_B, tau_hand_B, contact.force_B + F_tip_B
+        if self._kernel is not None:  # the contact and ToolLoads.readings, compiled
+            loads = contact_loads(
+                self._loads_constants,
+                self._k,
+                self._phantom,
+                F_hand_B,
+                tau_hand_B,
+                F_tip_B,
+                offset,
+                offset_rate,
             )
-            wrench_S, force_P = loads[:6], loads[6:]
+            wrench_S, force_P, F_contact, penetration = (
+                loads[:6],
+                loads[6:9],
+                loads[9:12],
+                loads[12:],
+            )
         else:
+            contact = contact_force(
+                self.params.phantom, p_BT, twist[:3], float(offset[0]), float(offset_rate[0])
+            )
             c0, c1, c2 = contact.force_B.tolist()
             t0, t1, t2 = F_tip_B.tolist()
             wrench_S, force_P = self._loads.readings(
@@ -245,7 +264,9 @@ class Plant:
                 p_BK,
                 a_P,
             )
-        depth = contact.depth
+            F_contact = contact.force_B
+            depth = contact.depth
+            penetration = np.array([depth if math.isfinite(depth) else -1.0])
         self._evaluated_at = key
         self._outputs = {
             "p_BT_B": p_BT,
@@ -257,7 +278,7 @@ class Plant:
             "R_BS": R_BS_rows,
             "wrench_S": wrench_S,
             "force_P": force_P,
-            "F_contact_B": contact.force_B,
-            "penetration": np.array([depth if math.isfinite(depth) else -1.0]),
+            "F_contact_B": F_contact,
+            "penetration": penetration,
         }
         return self._outputs

@@ -263,11 +263,28 @@ def test_ur5_kinematics_match_pinocchio():
     assert worst < REL, f"{name}: {worst:.3g}"
 
 
-def test_plant_matches_the_pinocchio_plant():
+FREEHAND_PHANTOMS = {
+    "plane": PhantomParams(plane_point_B=[0.0, 0.0, 0.245]),
+    "ellipsoid": PhantomParams(
+        shape="ellipsoid",
+        ellipsoid_center_B=[-0.05, -0.45, 0.145],
+        ellipsoid_axes=[0.17, 0.25, 0.1],
+    ),
+    "none": PhantomParams(shape="none"),
+}
+
+
+@pytest.mark.parametrize("shape", ["plane", "ellipsoid"])
+def test_plant_matches_the_pinocchio_plant(shape):
     """Both plants under the same commands and loads (a moving arm, a cable, a probe mass, the
-    phantom touched, commands to rest braked with speedL's larger `a`), and copies that carry on in
-    place of the originals."""
-    params = PlantParams(tool=ToolModel(probe_mass_kg=0.05, cable=CableDrag(enabled=True)))
+    phantom touched as it breathes, commands to rest braked with speedL's larger `a`), and copies
+    that carry on in place of the originals."""
+    params = PlantParams(
+        tool=ToolModel(probe_mass_kg=0.05, cable=CableDrag(enabled=True)),
+        phantom=PhantomParams(plane_point_B=[0.0, 0.0, 0.2])  # the tip goes down to 0.153 m
+        if shape == "plane"
+        else FREEHAND_PHANTOMS["ellipsoid"],
+    )
     pure, compiled = _pure_and_compiled(lambda: Plant(params))
     rng = np.random.default_rng(5)
     agree = Agreement()
@@ -286,6 +303,8 @@ def test_plant_matches_the_pinocchio_plant():
             "F_hand_B": rng.normal(0, 3, 3),
             "tau_hand_B": rng.normal(0, 0.2, 3),
             "F_tip_B": np.zeros(3) if k % 500 < 250 else rng.normal(0, 1, 3),
+            "surface_offset_m": np.array([0.01 * math.sin(1.6 * t)]),
+            "surface_rate_m_s": np.array([0.016 * math.cos(1.6 * t)]),
         }
         if k == 2000:
             pure, compiled = _copy_as_fmu_state(pure), _copy_as_fmu_state(compiled)
@@ -295,17 +314,7 @@ def test_plant_matches_the_pinocchio_plant():
     name, worst = agree.worst()
     assert worst < REL, f"{name}: {worst:.3g}"
     assert agree.scale["qd"] > 0.01  # the arm moved
-
-
-FREEHAND_PHANTOMS = {
-    "plane": PhantomParams(plane_point_B=[0.0, 0.0, 0.245]),
-    "ellipsoid": PhantomParams(
-        shape="ellipsoid",
-        ellipsoid_center_B=[-0.05, -0.45, 0.145],
-        ellipsoid_axes=[0.17, 0.25, 0.1],
-    ),
-    "none": PhantomParams(shape="none"),
-}
+    assert agree.scale["F_contact_B"] > 1.0  # and pressed on the phantom
 
 
 def _freehand_agreement(params: FreehandParams, *, wrong: float = 0.0) -> Agreement:
