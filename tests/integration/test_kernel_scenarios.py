@@ -5,8 +5,8 @@ carries that rounding on. Where the loop forgets it, every metric agrees within 
 Where it amplifies it (a probe sliding on the phantom under the hand's force feedback: a rounding
 difference grows about tenfold a second), no two codes that round differently can agree to 1e-12,
 however exact each is; there the difference must stay within what the pure path itself does when
-one joint angle of the start pose moves by one unit in the last place (the most of three such
-moves) (docs/decisions.md, "Speed,
+the start moves by one unit in the last place (a joint angle of the arm, a coordinate of the
+freehand probe; the most of three such moves) (docs/decisions.md, "Speed,
 side by side (issue 21)").
 """
 
@@ -22,14 +22,34 @@ from hoh_cosim.cosim.engines import simulate
 from hoh_cosim.cosim.report import compute_report
 from hoh_cosim.cosim.scenario import load_scenario
 from plant_models.arm import HOME_Q
+from plant_models.freehand import HOME_TIP_B
 from tests.integration.test_scenarios import SCENARIOS, SHORT
 
 REL = 1e-12
-AMPLIFYING = ("clinical_assisted", "contact_scan", "contact_scan_online")
+AMPLIFYING = ("clinical_assisted", "clinical_freehand", "contact_scan", "contact_scan_online")
 """Scenarios whose loop amplifies rounding (measured: the pure path's own metrics move by up to
 2e-4 relative for a one-ulp change of q0 over 30 s of contact_scan; clinical_assisted is a scan
 of the same kind on a breathing abdomen, whose image-plane jitter, a few micrometres, moved by 0.15
-relative between the two paths)."""
+relative between the two paths; clinical_freehand is that scan with the probe in the hand alone,
+its lateral jitter, 0.02 µm, moved by 6e-11)."""
+
+
+def _one_ulp_starts(name: str) -> list[tuple[str, ...]]:
+    """Overrides that move the start by one unit in the last place, three ways: one joint angle
+    of the arm's start pose, or for the freehand probe one coordinate of its start."""
+    if name == "clinical_freehand":
+        moves = []
+        for axis, direction in ((0, np.inf), (1, -np.inf), (2, np.inf)):
+            p = HOME_TIP_B.copy()
+            p[axis] = np.nextafter(p[axis], direction)
+            moves.append((f"freehand.p_BT0_B=[{', '.join(repr(x) for x in p.tolist())}]",))
+        return moves
+    moves = []
+    for joint, direction in ((0, np.inf), (0, -np.inf), (1, np.inf)):
+        q0 = HOME_Q.copy()
+        q0[joint] = np.nextafter(q0[joint], direction)
+        moves.append((f"plant.arm.q0=[{', '.join(repr(x) for x in q0.tolist())}]",))
+    return moves
 
 
 def _options(name: str) -> tuple[list[str], float | None]:
@@ -80,14 +100,11 @@ def test_metrics_match_the_pure_path(name):
 @pytest.mark.parametrize("name", AMPLIFYING)
 def test_where_the_loop_amplifies_rounding_the_difference_is_the_loops(name):
     pure = _metrics(name, False)
-    spread = 0.0  # the most one ulp of one joint angle moves the pure path's metrics
-    for joint, direction in ((0, np.inf), (0, -np.inf), (1, np.inf)):
-        q0 = HOME_Q.copy()
-        q0[joint] = np.nextafter(q0[joint], direction)
-        one_ulp = (f"plant.arm.q0=[{', '.join(repr(x) for x in q0.tolist())}]",)
+    spread = 0.0  # the most one ulp of the start moves the pure path's metrics
+    for one_ulp in _one_ulp_starts(name):
         spread = max(spread, _worst(pure, _metrics(name, False, one_ulp))[1])
     key, worst = _worst(pure, _metrics(name, True))
     assert worst <= max(REL, 10.0 * spread), (
-        f"{name}: {key} differs by {worst:.3g} relative; one ulp of q0 moves the pure path's "
-        f"metrics by {spread:.3g}"
+        f"{name}: {key} differs by {worst:.3g} relative; one ulp of the start moves the pure "
+        f"path's metrics by {spread:.3g}"
     )
