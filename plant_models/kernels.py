@@ -855,3 +855,33 @@ def freehand_step(
     out = np.empty(25)
     _freehand_step(constants, state, inputs, n, h, out)
     return out
+
+
+# --- an FT-150 packet (sensors.FT150Sensor._measure) ---------------------------------------------
+
+
+@njit(types.void(_IN, _IN, _IN, _IN, types.float64, _IN, _OUT, _OUT), cache=True, nogil=True)
+def _ft_packet(z, scale, true, offset, root_dt, quantum, drift, out):  # pragma: no cover
+    """A drifting, quantised packet from 12 standard normal draws z: drift += (z ⊙ s)[:6] √Δt
+    (in place), out = q ⊙ rint((true + offset + drift + (z ⊙ s)[6:]) / q), in numpy's order of
+    operations, so that the packet is the pure one to the bit."""
+    for i in range(6):
+        d = drift[i] + z[i] * scale[i] * root_dt
+        drift[i] = d
+        value = true[i] + offset[i] + d + z[6 + i] * scale[6 + i]
+        out[i] = np.rint(value / quantum[i]) * quantum[i]
+
+
+def ft_packet(
+    z: np.ndarray,
+    scale: np.ndarray,
+    true: np.ndarray,
+    offset: np.ndarray,
+    root_dt: float,
+    quantum: np.ndarray,
+    drift: np.ndarray,
+) -> np.ndarray:
+    """`_ft_packet` into a new (6,) array; `drift` advanced in place."""
+    out = np.empty(6)
+    _ft_packet(z, scale, true, offset, root_dt, quantum, drift, out)
+    return out

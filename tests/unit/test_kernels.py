@@ -31,6 +31,7 @@ from hoh_cosim.errors import ConfigError
 from plant_models.freehand import FreehandParams, FreehandProbe
 from plant_models.kernels import KINEMATICS_LAYOUT, KernelUR5
 from plant_models.plant import Plant, PlantParams
+from plant_models.sensors import FT150Params, FT150Sensor
 from plant_models.tissue import PhantomParams
 from plant_models.tool import CableDrag, ToolModel
 from tests.estimates import controller_inputs
@@ -371,6 +372,32 @@ def test_a_wrong_freehand_kernel_would_be_caught():
     apart."""
     agree = _freehand_agreement(FreehandParams(phantom=FREEHAND_PHANTOMS["plane"]), wrong=1e-9)
     assert agree.worst()[1] > 100 * REL
+
+
+def test_ft150_packets_are_the_pure_ones_to_the_bit():
+    """The compiled packet (drift, noise, quantisation) keeps numpy's order of operations: the
+    same draws give the same packets, bit for bit, over a moving wrench, a retune and a copy."""
+    pure, compiled = _pure_and_compiled(
+        lambda: FT150Sensor(FT150Params(), rng=np.random.default_rng(3))
+    )
+    assert compiled._compiled
+    assert not pure._compiled
+    rng = np.random.default_rng(4)
+    packets = 0
+    for k in range(3000):
+        t = k * 1e-3
+        true = {"wrench_S_true": rng.normal(0.0, 5.0, 6)}
+        if k == 1500:
+            pure, compiled = _copy_as_fmu_state(pure), _copy_as_fmu_state(compiled)
+            tuned = dataclasses.replace(pure.params, offset=np.full(6, 0.3))
+            pure.retune(tuned)
+            compiled.retune(tuned)
+        a, b = pure.step(t, 1e-3, true), compiled.step(t, 1e-3, true)
+        assert np.array_equal(a["wrench_S"], b["wrench_S"]), t
+        packets = int(a["counter"][0])
+    assert packets > 500
+    assert np.array_equal(pure.drift, compiled.drift)
+    assert np.any(pure.drift != 0.0)
 
 
 def test_warm_up_is_idempotent():
