@@ -216,7 +216,7 @@ class FreehandProbe:
         self._gripped = False
         if self._constants is not None:
             self._outputs = self._unpack(
-                freehand_step(self._constants, self._x, np.zeros(12), 0, 0)
+                freehand_step(self._constants, self._x, np.zeros(12), 0, 0.0)
             )
         else:
             self._outputs = self._evaluate(
