@@ -43,16 +43,59 @@ def pytest_configure(config: pytest.Config) -> None:
         )
 
 
+_WARM_UP = (
+    "from hoh_cosim.control.kernels import warm_up; from plant_models.plant import Plant; "
+    "warm_up(); Plant()"
+)
+"""What compiles (on a fresh machine) or loads every kernel: the control core's, and the plant's
+(plant_models.kernels: the eager ones at import, the UR5's kinematics at Plant())."""
+
+
+def _installed_plant_models() -> str | None:
+    """Where a process started outside this checkout imports plant_models from, if not from here.
+
+    The suite imports the checkout's `plant_models` (the root is on its path, for `tests`), but the
+    processes it starts from elsewhere (an FMU probe, a study's Dask worker, a `hoh-cosim` run)
+    import the installed one: after `pip install .` (not `-e`) that is a second copy, whose numba
+    cache is a second cache."""
+    import importlib.machinery
+    import os
+    import sys
+    from pathlib import Path
+
+    import plant_models
+
+    root = Path(__file__).resolve().parents[1]
+    path = [p for p in sys.path if p and Path(p).resolve() != root and p != os.curdir]
+    spec = importlib.machinery.PathFinder.find_spec("plant_models", path)
+    if spec is None or spec.origin is None:
+        return None
+    here = Path(plant_models.__file__).resolve()
+    return None if Path(spec.origin).resolve() == here else spec.origin
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_sessionstart(session: pytest.Session) -> None:
     """Compile (on a fresh machine) or load the kernels of hoh_cosim.control.kernels and
     plant_models.kernels once, in the process that starts the workers: otherwise every worker
     compiles them at once at its first test (10-30 s each on a fresh machine, measured), and the
-    real-time tests' worlds would wait for it. Later processes load them from the cache."""
+    real-time tests' worlds would wait for it. Later processes load them from the cache. Where the
+    installed plant_models is another copy than the checkout's, a process started outside the
+    checkout warms its cache at the same time: otherwise each FMU probe and study worker compiled
+    the plant's kernels again (20 s for the plant's FMU on a fresh clone, measured)."""
     if hasattr(session.config, "workerinput"):
         return
+    import subprocess
+    import sys
+    import tempfile
+
     from hoh_cosim.control.kernels import warm_up
     from plant_models.plant import Plant
 
+    other = None
+    if _installed_plant_models() is not None:
+        other = subprocess.Popen([sys.executable, "-c", _WARM_UP], cwd=tempfile.gettempdir())
     warm_up()
     Plant()
+    if other is not None and other.wait() != 0:
+        raise pytest.UsageError("the installed plant_models' kernels failed to compile")
