@@ -793,7 +793,7 @@ def _freehand_forces(P, x, inp, out, f, M, C, K, jac):  # pragma: no cover - com
             K[i, i] += P[22]
 
 
-@njit(types.void(_IN, _OUT, _IN, types.int64, types.float64, _OUT), cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _freehand_step(P, x, inp, n, h, out):  # pragma: no cover - compiled
     """`FreehandProbe.step`'s n linearly implicit Euler substeps of h on the state x (in place),
     then the outputs into `out`: (M + h C + h² K) u₁ = (M + h C) u₀ + h f, x₁ = x₀ + h u₁ with
