@@ -38,18 +38,15 @@ def _one_ulp_starts(name: str) -> list[tuple[str, ...]]:
     """Overrides that move the start by one unit in the last place, three ways: one joint angle
     of the arm's start pose, or for the freehand probe one coordinate of its start."""
     if name == "clinical_freehand":
-        moves = []
-        for axis, direction in ((0, np.inf), (1, -np.inf), (2, np.inf)):
-            p = HOME_TIP_B.copy()
-            p[axis] = np.nextafter(p[axis], direction)
-            moves.append((f"freehand.p_BT0_B=[{', '.join(repr(x) for x in p.tolist())}]",))
-        return moves
-    moves = []
-    for joint, direction in ((0, np.inf), (0, -np.inf), (1, np.inf)):
-        q0 = HOME_Q.copy()
-        q0[joint] = np.nextafter(q0[joint], direction)
-        moves.append((f"plant.arm.q0=[{', '.join(repr(x) for x in q0.tolist())}]",))
-    return moves
+        key, start, moves = "freehand.p_BT0_B", HOME_TIP_B, ((0, np.inf), (1, -np.inf), (2, np.inf))
+    else:
+        key, start, moves = "plant.arm.q0", HOME_Q, ((0, np.inf), (0, -np.inf), (1, np.inf))
+    out = []
+    for i, direction in moves:
+        moved = start.copy()
+        moved[i] = np.nextafter(moved[i], direction)
+        out.append((f"{key}=[{', '.join(repr(x) for x in moved.tolist())}]",))
+    return out
 
 
 def _options(name: str) -> tuple[list[str], float | None]:
