@@ -1,4 +1,7 @@
-"""Compiled kinematics of the UR5 and its tool frames (numba), checked against pinocchio.
+"""The plant models' compiled kernels (numba): the UR5's kinematics and its tool frames, checked
+against pinocchio; and checked against their pure code, the phantom's contact with the sensors'
+readings (`contact_loads`), an FT-150 packet (`ft_packet`, to the bit) and the freehand probe's
+implicit step (`freehand_step`).
 
 The plant asks, at every tick the arm moves, for the placements of the TCP and the wrist sensor, the
 TCP's twist and the classical accelerations of the tool's centre of mass and of the probe sensor;
@@ -258,7 +261,7 @@ def loads_constants(tool: object, g_B: np.ndarray) -> np.ndarray:
 @njit(cache=True, nogil=True, inline="always")
 def _loads(C, k, F_hand, tau_hand, F_contact, out):  # pragma: no cover - compiled
     """(wrench of the tool on the wrist sensor in S, force of the probe on the probe sensor in P)
-    into `out` (9,), from the kinematics `k` (KINEMATICS_LAYOUT) and the loads in B:
+    into `out[:9]`, from the kinematics `k` (KINEMATICS_LAYOUT) and the loads in B:
 
         f = F_hand + F_contact + F_cable + m (g - a_C)
         τ_S = τ_hand + p_SH × F_hand + p_ST × F_contact + p_SK × F_cable + p_SC × m (g - a_C)
