@@ -81,6 +81,22 @@ _OUTPUTS = (
 """Where each output sits in the compiled step's array (`plant_models.kernels.freehand_step`)."""
 
 
+class _StatePart:
+    """A part of `FreehandProbe._x` as an attribute: reading gives a view (in `shape`), assigning
+    writes the values into the state."""
+
+    def __init__(self, start: int, stop: int, shape: tuple[int, ...] | None = None) -> None:
+        self.at = slice(start, stop)
+        self.shape = shape
+
+    def __get__(self, probe: Any, owner: type | None = None) -> Vec:
+        part = probe._x[self.at]
+        return part if self.shape is None else part.reshape(self.shape)
+
+    def __set__(self, probe: Any, value: Vec) -> None:
+        probe._x[self.at] = np.reshape(value, -1)
+
+
 @dataclass(frozen=True)
 class FreehandParams:
     UNITS: ClassVar[dict[str, Any]] = {
@@ -158,29 +174,9 @@ class FreehandProbe:
         self.reset()
 
     # the pure path's views of the state (each assignment writes into it)
-    @property
-    def _p_C(self) -> Vec3:
-        return self._x[0:3]
-
-    @_p_C.setter
-    def _p_C(self, value: Vec3) -> None:
-        self._x[0:3] = value
-
-    @property
-    def _R(self) -> Rot3:
-        return self._x[3:12].reshape(3, 3)
-
-    @_R.setter
-    def _R(self, value: Rot3) -> None:
-        self._x[3:12] = value.reshape(9)
-
-    @property
-    def _u(self) -> Vec:
-        return self._x[12:18]
-
-    @_u.setter
-    def _u(self, value: Vec) -> None:
-        self._x[12:18] = value
+    _p_C = _StatePart(0, 3)  # [m] the centre of mass, in B
+    _R = _StatePart(3, 12, (3, 3))  # R_BS
+    _u = _StatePart(12, 18)  # [v_C; ω], in B
 
     def _derive(self) -> None:
         p = self.params
