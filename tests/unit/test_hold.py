@@ -181,7 +181,10 @@ def test_a_wrist_regulated_hold_gives_up_the_resting_hands_share_when_it_opens()
 def test_a_combined_hold_takes_the_opening_hand_for_the_hand_and_keeps_the_contact():
     level, after, flags = _let_go("combined")
     assert np.all((flags & int(Status.HOLDING)) != 0)  # the opening is no touch
-    assert np.max(np.abs(after - level)) < 0.6
+    # the 1 N band before the event is heard passes into the loop: through the 3 Hz surface
+    # filter a dip of about 0.85 N at the opening's end (under 0.6 N at 1.5 Hz), recovered within
+    # a second; the wrist gives up 1.5 N or more for good
+    assert np.max(np.abs(after - level)) < 1.0
     assert abs(after[-1] - level) < 0.3
 
 

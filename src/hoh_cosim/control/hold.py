@@ -32,7 +32,8 @@ hand does freehand, and what this block does once the hand is off the handle.
                With k̂ = k the measurement m does not depend on the robot at all (m = surface +
                depth): the robot follows a filtered surface (feed-forward) and its own exactly
                measured position (k_z), so the force sensor's noise reaches the tip only through
-               the filter's band, below the image jitter's 2 Hz; a k̂ off by a factor ρ = k / k̂
+               the filter's band (3 Hz: a trade between the breath's tracking and the noise
+               passed, docs/decisions.md); a k̂ off by a factor ρ = k / k̂
                leaves a loop of gain 1 - ρ, stable for 0 < ρ < 2. The slow integral takes out
                what the linearisation leaves (the tissue stiffens with depth). Across the axis and
                in rotation the command is rest: the rest of the pose held
@@ -169,7 +170,11 @@ class HoldParams:
     # 1000-1560 N/m at 5-20 N; a factor of two either way stays stable, module docstring)
     stiffness_N_m: float = 1200.0
     force_noise_N: float = 0.09  # [N] σ of the regulated force's packets (FT-150 along z)
-    observer_hz: float = 1.5  # the surface filter's bandwidth: breathing passes, tremor-band not
+    # the surface filter's bandwidth: a breath's sin⁴ shape has its second harmonic at up to
+    # 0.67 Hz (20 a minute), which a constant-acceleration filter follows with an error of about
+    # (f / observer_hz)³ of it; tremor's 8-12 Hz stays out (docs/decisions.md, "the surface
+    # filter's bandwidth")
+    observer_hz: float = 3.0
     position_gain: float = 10.0  # k_z [1/s]
     ki: float = 0.5  # k_i [1/s]: the force error's slow integral
     lookahead_s: float = 0.02  # [s] the robot's delay, predicted over
