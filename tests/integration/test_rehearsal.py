@@ -258,17 +258,16 @@ def test_a_probe_silenced_by_a_starved_machine_is_not_taken_for_a_silent_device(
     assert len(hogs) == (os.cpu_count() or 1)
     assert outcome.result.clean, outcome.result.cause
     assert outcome.result.cause == "stopped on request"
-    # the runner said what it did not count: the FSE103's silence while the machine starved
+    # the runner said what it did not count: the FSE103's silence while the machine starved (the
+    # FT-150's reader may have been held back a few milliseconds too, and says so the same way)
     starved = [m["detail"] for m in outcome.log.messages["/events"] if m["event"] == "starved"]
-    found = [
-        re.fullmatch(
-            rf"FSE103 on \S+: (\d+) {re.escape(STARVED_TEXT)}, not counted as its silence", d
-        )
-        for d in starved
-    ]
+    said_as = rf"(FSE103 on \S+|FT-150 stream at \S+): (\d+) {re.escape(STARVED_TEXT)}, "
+    found = [re.fullmatch(said_as + "not counted as its silence", d) for d in starved]
     assert found, starved
     assert all(found), starved
-    assert 0.5 * hog_s <= 1e-3 * sum(int(f[1]) for f in found) <= 1.0 + hog_s
+    probe = [int(f[2]) for f in found if f[1].startswith("FSE103")]
+    assert probe, starved
+    assert 0.5 * hog_s <= 1e-3 * sum(probe) <= 1.0 + hog_s
 
 
 def unlogged_session(
