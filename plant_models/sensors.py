@@ -243,23 +243,21 @@ class FT150Sensor(_PacketSensor):
         if p.ideal:
             return true.copy()
         t_sample = self.clock.next_sample_s
+        elapsed = t_sample - self._last_sample_time
+        self._last_sample_time = t_sample
         if self._drifts and self._quantum is not None and self._compiled:
             # the common case in one compiled call, to the bit the numpy below (kernels.ft_packet)
             z = self.rng.standard_normal(12)
-            elapsed = t_sample - self._last_sample_time
-            self._last_sample_time = t_sample
             return ft_packet(
                 z, self._draw_scale, true, p.offset, math.sqrt(elapsed), self._quantum, self.drift
             )
         if self._drifts:
             # one draw of 12 gives the same numbers as the drift's 6 then the noise's 6
             scaled = self.rng.standard_normal(12) * self._draw_scale
-            elapsed = t_sample - self._last_sample_time
             self.drift = self.drift + scaled[:6] * math.sqrt(elapsed)
             noise = scaled[6:]
         else:
             noise = self.rng.standard_normal(6) * p.noise_sigma
-        self._last_sample_time = t_sample
         value = true + p.offset + self.drift + noise
         if self._quantum is not None:  # every axis quantised: the common case, two operations
             return np.rint(value / self._quantum) * self._quantum
