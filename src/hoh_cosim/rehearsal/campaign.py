@@ -303,6 +303,7 @@ class _Monitor(threading.Thread):
         self.offset_s = math.inf  # monotonic minus world time, at the sample read soonest
         self.moving_at_end = False
         self.last_moving_s = math.nan  # the world's, once done
+        self.last_commanded_s = math.nan  # the world's last command to move, once done
         self.done = threading.Event()
 
     def run(self) -> None:
@@ -312,6 +313,7 @@ class _Monitor(threading.Thread):
             self.moving_at_end = float(np.linalg.norm(state[12:18])) > 1e-9
             time.sleep(0.002)
         self.last_moving_s = self.world.last_moving()
+        self.last_commanded_s = self.world.last_commanded()
 
     def standstill_after(self, t: float) -> float:
         """When the arm came to rest for good after `t` (monotonic), NaN if it never did."""
@@ -320,6 +322,17 @@ class _Monitor(threading.Thread):
         if math.isnan(self.last_moving_s):
             return t
         return max(t, self.last_moving_s + self.offset_s)
+
+    def late(self, t: float) -> str:
+        """What a standstill later than its bound after `t` (monotonic) comes with: when the
+        world last read a command to move, after `t`, so that a late command to rest is told
+        from an arm that did not follow one."""
+        if math.isnan(self.last_commanded_s):
+            return "the world never read a command to move"
+        after = self.last_commanded_s + self.offset_s - t
+        if after <= 0.0:
+            return "the world read no command to move after it"
+        return f"the world read a command to move until {_ms(after)} ms after it"
 
 
 class _Hog:
@@ -606,7 +619,7 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
         if not standstill_s <= bound_s:
             v.append(
                 f"the arm stood still {_ms(standstill_s) or 'never'} ms after the {stream} fell "
-                f"silent (bound {_ms(bound_s)} ms)"
+                f"silent (bound {_ms(bound_s)} ms; {monitor.late(silent_from)})"
             )
     judged = [(f, at) for f, at in run.injected if silence is None or at < silence[1]]
     stopping = [(f, at) for f, at in judged if stops(f)]
@@ -641,7 +654,7 @@ def _judge(run: Run, said: str, log: Path, monitor: _Monitor, killed_at: float) 
         if not run.standstill_s <= run.bound_s:
             v.append(
                 f"the arm stood still {_ms(run.standstill_s) or 'never'} ms after the fault "
-                f"(bound {_ms(run.bound_s)} ms)"
+                f"(bound {_ms(run.bound_s)} ms; {monitor.late(fault_at)})"
             )
     elif maybe:
         if (

@@ -243,9 +243,10 @@ class _World:
         self.pty_name = os.ttyname(slave)
         self.faults = sorted(setup.faults, key=lambda f: f.at_s)
         self.injections = injections
-        # the loop's longest stall [s] and the world time it began at (RehearsalWorld.stall), and
-        # the world time after the arm's last moving tick (RehearsalWorld.last_moving)
-        self.health = health if health is not None else [0.0, math.nan, math.nan]
+        # the loop's longest stall [s] and the world time it began at (RehearsalWorld.stall), the
+        # world time after the arm's last moving tick (RehearsalWorld.last_moving) and after the
+        # last tick whose command asked it to move (RehearsalWorld.last_commanded)
+        self.health = health if health is not None else [0.0, math.nan, math.nan, math.nan]
         self.ending: dict[str, float] = {}  # world time at which a fault of that kind ends
         self.ft_stalled = self.protective = self.program_stopped = False
         self.ft_nan = self.nan_next = False
@@ -436,6 +437,8 @@ class _World:
         if round(t / WORLD_DT) % 20 == 0 and "ft_disconnect" not in self.ending:  # every 20 ms
             self._accept()
         twist = self._command(time.monotonic())
+        if twist.any():
+            self.health[3] = t + WORLD_DT
         if self.task_held and self.go:  # the rebias is done: the hand comes in a moment
             self.task_held = False
             start = t + TASK_LEAD_S
@@ -529,7 +532,7 @@ class RehearsalWorld:
         self._ready = context.Queue()
         self._stop = context.Event()
         self._injections = context.Queue()
-        self._health = context.RawArray("d", [0.0, math.nan, math.nan])
+        self._health = context.RawArray("d", [0.0, math.nan, math.nan, math.nan])
         self._process = context.Process(
             target=_world_main,
             args=(
@@ -589,6 +592,12 @@ class RehearsalWorld:
         """The world time [s] at which the arm last moved (its speed above 1 nm/s), NaN if never:
         kept by the world tick by tick, whoever looks and however late."""
         return float(self._health[2])
+
+    def last_commanded(self) -> float:
+        """The world time [s] at which the arm's command, as the world read it, last asked for
+        motion (a twist not zero), NaN if never: what tells a late standstill's two causes apart,
+        a late command to rest or an arm that did not follow it."""
+        return float(self._health[3])
 
     def stop(self) -> None:
         self._stop.set()
