@@ -67,14 +67,16 @@ def _rig_stalled(row: dict) -> bool:
 
 
 def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
-    # the README's campaign cut to 20 runs (seeds 11 to 30), whose first faults are of every kind
-    # there is, each with up to two more of any kind; one run at a time, as the real-time tests
-    # go, beside the rest of the suite on the other core
+    # the README's campaign cut to one run per fault kind: seeds 0 to 14, whose first faults are
+    # each kind there is once, each with up to two more of any kind; one run at a time, as the
+    # real-time tests go, beside the rest of the suite on the other core
     out = tmp_path / "campaign"
-    done, summary, rows = _campaign(20, 11, out, rig_stalls_allowed=True)
-    assert summary["runs"] == 20
+    runs = len(campaign.KINDS)
+    done, summary, rows = _campaign(runs, 0, out, rig_stalls_allowed=True)
+    assert summary["runs"] == runs
     kinds = tuple(campaign.KINDS)
-    assert {campaign.draw_faults(seed, kinds)[0].kind for seed in range(11, 31)} == set(kinds)
+    firsts = sorted(campaign.draw_faults(seed, kinds)[0].kind for seed in range(runs))
+    assert firsts == sorted(kinds)
     injected = {kind for r in rows for kind in r["injected"].split()}
     # A run that this machine stopped before its faults (a stream starved for the runner's 1 s
     # cap: seen in CI with the rest of the suite on both cores) did not inject them all; it is run
@@ -90,7 +92,7 @@ def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
             row.update({key: value for key, value in again.items() if key != "run"})
             injected.update(again["injected"].split())
     assert injected == set(kinds)
-    assert [int(r["run"]) for r in rows] == list(range(20))
+    assert [int(r["run"]) for r in rows] == list(range(runs))
     # a run's faults are its seed's alone: what `--runs 1 --seed <seed>` would draw again
     for row in rows:
         drawn = campaign.draw_faults(int(row["seed"]), kinds)
@@ -107,7 +109,14 @@ def test_the_checker_reports_a_run_that_does_not_do_what_its_fault_calls_for(tmp
     # garbage in the FT-150 stream calls for no stop: told that it does, the checker must object
     lying = dataclasses.replace(campaign.KINDS["ft_garbage"], stops=lambda duration_s: True)
     monkeypatch.setitem(campaign.KINDS, "ft_garbage", lying)
-    (run,) = campaign.run_campaign(1, 7, 1, tmp_path, kinds=("ft_garbage",))
+    # Run again once if the probe's stream ended the session: the fault is the FT-150's, so that
+    # stop is no finding of this checker (seen once in a loaded suite: "FSE103 ...: no new sample
+    # for 250 ms", the world's loop never more than 6 ms late). A second such stop fails.
+    for attempt in range(2):
+        where = tmp_path / f"attempt-{attempt}"
+        (run,) = campaign.run_campaign(1, 7, 1, where, kinds=("ft_garbage",))
+        if run.returncode == 0 or "FSE103" not in run.cause:
+            break
     assert run.returncode == 0, run.cause
     assert any(v.startswith("no stop after ft_garbage") for v in run.violations), run.violations
 
@@ -120,6 +129,9 @@ class _Standstill:
 
     def standstill_after(self, t: float) -> float:
         return max(t, self.at)
+
+    def late(self, t: float) -> str:
+        return "the world read no command to move after it"
 
 
 def test_a_stop_is_timed_from_the_fault_its_cause_names(tmp_path):
@@ -143,6 +155,33 @@ def test_a_stop_is_timed_from_the_fault_its_cause_names(tmp_path):
     assert any(
         v.startswith("the cause does not name ft_stall/program_stopped") for v in run.violations
     )
+
+
+def test_a_late_standstill_says_whether_the_command_or_the_arm_was_late(tmp_path):
+    # the monitor's figures as the world left them: world time = monotonic - 50 s
+    monitor = campaign._Monitor(world=None)
+    monitor.offset_s = 50.0
+    monitor.last_commanded_s = 50.3  # the last command to move read at 100.3 s monotonic
+    assert monitor.late(100.0) == "the world read a command to move until 300.0 ms after it"
+    assert monitor.late(100.4) == "the world read no command to move after it"
+    monitor.last_commanded_s = math.nan
+    assert monitor.late(100.0) == "the world never read a command to move"
+    # and the judge puts it in the violation
+    stop = campaign.CampaignFault("protective_stop", 1.0)
+    run = campaign.Run(0, 15, (stop,), injected=[(stop, 100.0)])
+    run.returncode = 1
+    cause = "UR controller at h (RTDE): the robot is in a protective stop"
+    monitor.moving_at_end, monitor.last_moving_s = False, 50.4
+    monitor.last_commanded_s = 50.39
+    campaign._judge(
+        run,
+        f"stopping: {cause}\nsession ended: {cause}\n",
+        tmp_path / "none.mcap",
+        monitor,
+        math.nan,
+    )
+    (late,) = [v for v in run.violations if "stood still" in v]
+    assert late.endswith("the world read a command to move until 390.0 ms after it)"), late
 
 
 def test_faults_are_drawn_from_the_seed_alone():
