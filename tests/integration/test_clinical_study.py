@@ -17,6 +17,7 @@ from hoh_cosim.study.clinical import (
     FREEHAND,
     HOLD,
     MODES,
+    PROBE_CHECK_S,
     TASKS,
     _shared_modes,
     study_variants,
@@ -92,9 +93,10 @@ def test_every_operator_does_every_task_in_every_mode(study) -> None:
         for key in ("hand_force_rms_N", "jitter_image_mm", "path_rms_error_m"):
             assert r[key] != "", (r["task"], r["mode"], key)
         # a goal never reached and held is a result, not a metric that failed: in the short study
-        # the transparency laws may not settle the view within 2 mm and 10 %, and the hold keeps
-        # the force it found, not the hand's target
-        if r["mode"] not in ("transparency", HOLD):
+        # the transparency laws may not settle the view within 2 mm and 10 %, the hold keeps the
+        # force it found, not the hand's target, and after the probe check the robot no longer
+        # yields to the breath (the probe's under-reading did), so the view's force swings wider
+        if r["mode"] not in ("transparency", HOLD, "checked"):
             assert r["task_time_s"] != "", (r["task"], r["mode"])
     with (out / "operators.csv").open() as f:
         assert len(list(csv.DictReader(f))) == OPERATORS
@@ -195,6 +197,28 @@ def _rows(out: Path, mode: str) -> list[dict[str, str]]:
         return [r for r in csv.DictReader(f) if r["mode"] == mode]
 
 
+def test_the_probe_check_comes_first_and_takes_the_probe_sensors_error_off_the_hand(study) -> None:
+    # the checked mode's runs begin with the probe check: the task, the breaths and the run's end
+    # PROBE_CHECK_S later than under today's defaults, the online map on
+    keyed = dict(study_variants(SCENARIOS, 1, seed=5, quick=True))
+    for task in TASKS:
+        defaults, checked = keyed[(0, task, "defaults")], keyed[(0, task, "checked")]
+        assert checked.duration_s == pytest.approx(defaults.duration_s + PROBE_CHECK_S)
+        assert "estimator.probe_correction.kind=online" in checked.overrides
+        assert "estimator.probe_correction.kind=online" not in defaults.overrides
+    # Along the probe the hand pushed past the FSE103's gain error (0.15 sigma per axis) under
+    # today's defaults; with the housing mapped, it does not: on the view and the press, whose
+    # force is held, every operator's hand force is lower after the check (a quick study of three
+    # operators: 1.2-1.4 N against 2.2-2.4 N RMS on the view, 0.9-2.0 N against 3.1-3.6 N on the
+    # press).
+    _, out = study
+    defaults = {(r["operator"], r["task"]): r for r in _rows(out, "defaults")}
+    for r in _rows(out, "checked"):
+        if r["task"] in ("view", "press"):
+            before = float(defaults[(r["operator"], r["task"])]["hand_force_rms_N"])
+            assert float(r["hand_force_rms_N"]) < 0.8 * before, (r["operator"], r["task"])
+
+
 def test_an_operator_is_the_same_person_and_patient_in_every_run() -> None:
     keyed = study_variants(SCENARIOS, 2, seed=5, quick=True)
     by_operator: dict[int, set] = {}
@@ -207,8 +231,11 @@ def test_an_operator_is_the_same_person_and_patient_in_every_run() -> None:
         )
         by_operator.setdefault(i, set()).add((variant.seed, person))
         assert any(o.startswith(f"{MODES[mode].grip}.grip_stiffness") for o in variant.overrides)
-        # the breathing starts with the task: on the robot after the rebias, freehand at once
-        start = "3.0" if MODES[mode].assisted else "0.0"
+        # the breathing starts with the task: on the robot after the rebias (and the probe check,
+        # in the mode that has one), freehand at once
+        start = 0.0
+        if MODES[mode].assisted:
+            start = 3.0 + (PROBE_CHECK_S if mode == "checked" else 0.0)
         assert f"breathing.start_s={start}" in variant.overrides
     assert all(len(kinds) == 1 for kinds in by_operator.values())
     assert by_operator[0] != by_operator[1]

@@ -35,6 +35,7 @@ import csv
 import io
 import json
 import math
+import textwrap
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -223,6 +224,22 @@ TRANSPARENCY = (
 """The transparency issue's laws on today's defaults (docs/decisions.md, "Transparency past the
 seed"): the lead-lag low-pass filter, the variable admittance, release detection with its brake,
 the passivity observer and controller."""
+PROBE_CHECK_S = 20.0
+"""The probe check's length: ten pushes on the probe's tip, the online map's reference (as in
+scenarios/contact_scan_online.yaml)."""
+PROBE_CHECK = (
+    set_option("operator.probe_check_s", PROBE_CHECK_S),
+    # the task then, as clinical_assisted.yaml's 3 s after the rebias, after the check
+    set_option("operator.start_s", 3.0 + PROBE_CHECK_S),
+    "estimator.probe_correction.kind=online",
+    set_option("estimator.probe_correction.check_s", PROBE_CHECK_S),
+)
+"""Today's defaults after a probe check (`hoh_cosim.control.probe_correction`, the online map): the
+session begins with the hand off the handle and the robot still while the probe's tip is pushed
+(`probe_check_s`), and the estimator maps the FSE103's housing of the day; the contact compensation
+(eq. 11-12) then uses the corrected probe force. The FSE103's gain error (0.15 σ per axis, seed
+3.B.2) is what kept the view's effort from 75 % less under the other laws (docs/decisions.md,
+"The probe check in the clinical study")."""
 HOLD_ON_RELEASE = (
     "controller.release.enabled=true",
     "controller.hold.enabled=true",
@@ -269,6 +286,12 @@ MODES: dict[str, Mode] = {
         ),
         Mode("seed", "assisted, the seed's law", "clinical_assisted.yaml", _seed_law()),
         Mode("defaults", "assisted, today's defaults", "clinical_assisted.yaml"),
+        Mode(
+            "checked",
+            "assisted, today's defaults after a probe check",
+            "clinical_assisted.yaml",
+            PROBE_CHECK,
+        ),
         Mode(
             "transparency",
             "assisted, the transparency laws",
@@ -317,9 +340,11 @@ def _operator_overrides(mode: Mode, index: int, seed: int) -> list[str]:
 
 
 def _start_s(scenarios: Path, mode: Mode) -> float:
+    """When the hand takes the probe in `mode`'s runs (its overrides included: a probe check
+    comes first)."""
     from hoh_cosim.cosim.scenario import load_scenario
 
-    op = load_scenario(scenarios / mode.scenario).component_of_kind("operator")
+    op = load_scenario(scenarios / mode.scenario, mode.overrides).component_of_kind("operator")
     assert op is not None, "a clinical scenario has an operator"
     return float(op.params.start_s)
 
@@ -748,6 +773,7 @@ _COLOURS = {
     FREEHAND: "tab:red",
     "seed": "tab:blue",
     "defaults": "tab:green",
+    "checked": "tab:brown",
     "transparency": "tab:orange",
     HOLD: "tab:purple",
 }
@@ -755,6 +781,13 @@ _COLOURS = {
 
 def _colour(mode: str) -> str:
     return _COLOURS.get(mode, "tab:purple")
+
+
+def _tick(mode: str) -> str:
+    """A mode's label on an axis: without "assisted, " (every robot mode is), wrapped to fit the
+    width a mode has in a row of six."""
+    label = MODES[mode].label.removeprefix("assisted, ")
+    return textwrap.fill(label, 12, break_on_hyphens=False, break_long_words=False)
 
 
 def _figures(
@@ -765,7 +798,7 @@ def _figures(
     plt = pyplot()
     figures: dict[str, bytes] = {}
     modes = list(MODES)
-    labels = [MODES[m].label.replace(", ", "\n") for m in modes]
+    labels = [_tick(m) for m in modes]
 
     def by_operator(fig_name: str, key: str, scale: float, ylabel: str, title: str) -> None:
         fig, axes = plt.subplots(1, len(TASKS), figsize=(4.2 * len(TASKS), 4.2), squeeze=False)
@@ -777,7 +810,7 @@ def _figures(
                 ax.plot(xs, vals, color="0.75", lw=0.8, zorder=1)
                 for j, v in zip(xs, vals, strict=True):
                     ax.plot(j, v, "o", ms=4, color=_colour(modes[j]), zorder=2)
-            ax.set_xticks(range(len(modes)), labels, fontsize=8)
+            ax.set_xticks(range(len(modes)), labels, fontsize=7)
             ax.set_xlim(-0.5, len(modes) - 0.5)
             ax.set_title(f"{task}: {TASKS[task].label}", fontsize=9)
             ax.grid(True, lw=0.4, color="0.9")
@@ -820,9 +853,7 @@ def _figures(
                 if s["ci95"] is not None:
                     err = [[s["mean"] - s["ci95"][0]], [s["ci95"][1] - s["mean"]]]
                 ax.errorbar(j + 0.3, s["mean"], yerr=err, fmt="s", color="k", ms=5, capsize=4)
-        ax.set_xticks(
-            range(len(ASSISTED)), [MODES[m].label.replace(", ", "\n") for m in ASSISTED], fontsize=8
-        )
+        ax.set_xticks(range(len(ASSISTED)), [_tick(m) for m in ASSISTED], fontsize=7)
         ax.set_xlim(-0.6, len(ASSISTED) - 0.4)
         ax.set_title(task, fontsize=9)
         ax.grid(True, lw=0.4, color="0.9")
