@@ -10,6 +10,7 @@ import csv
 import dataclasses
 import json
 import math
+import re
 import socket
 import subprocess
 import sys
@@ -40,8 +41,8 @@ def _campaign(
     summary = json.loads((out / "summary.json").read_text())
     rows = list(csv.DictReader((out / "campaign.csv").read_text().splitlines()))
     failed = [r for r in rows if r["violations"]]
-    if rig_stalls_allowed:  # only in runs whose emulated devices the machine held back
-        failed = [r for r in failed if not _rig_stalled(r)]
+    if rig_stalls_allowed:  # only in runs whose emulated devices failed them
+        failed = [r for r in failed if not (_rig_stalled(r) or _device_fell_silent(r))]
     else:
         assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
     assert not failed, summary["failed_runs"]
@@ -66,6 +67,47 @@ def _rig_stalled(row: dict) -> bool:
     return row["rig_stall_ms"] != "" and float(row["rig_stall_ms"]) >= 1e3 * campaign.RIG_STALL_S
 
 
+_SILENT = re.compile(
+    r"^stopped though no fault called for it: '(?P<stream>FT-150 stream at|FSE103 on) \S+: "
+    r"no new sample for \d+ ms"
+)
+
+
+def _device_fell_silent(row: dict) -> bool:
+    """Whether the run's one finding is an emulated device's stream falling silent with no fault
+    of ours on that stream or on the machine: the runner stopped, as it must when a device goes
+    quiet, and the device is the rig's. Seen twice in suite runs, both the FSE103's pseudo-terminal;
+    in the one whose files were kept (seed 0) its frames stopped arriving 0.1 s into the session
+    while the world's loop (1.2 ms at most between turns) and the FT-150's TCP stream kept time."""
+    (violation, *more) = row["violations"].split("; ")
+    match = _SILENT.match(violation)
+    if more or match is None:
+        return False
+    prefix = "ft_" if match["stream"].startswith("FT-150") else "probe_"
+    if prefix == "probe_" and row["probe_refused"] != "0":
+        return False  # the terminal was full: the runner did not read it, which is the runner's
+    return not any(k.startswith(prefix) or k == "cpu_hog" for k in row["injected"].split())
+
+
+def test_only_a_device_silent_on_its_own_is_taken_for_the_rigs():
+    silent = (
+        "stopped though no fault called for it: 'FSE103 on /dev/pts/0: no new sample for 250 ms"
+    )
+    row = {"violations": silent + " (the stream stalled)'", "injected": "", "probe_refused": "0"}
+    assert _device_fell_silent(row)
+    # frames the terminal refused: it was full, so the runner did not read it
+    assert not _device_fell_silent({**row, "probe_refused": "3"})
+    assert _device_fell_silent({**row, "injected": "ft_garbage rtde_drop"})
+    # a fault of ours on that stream, or on the machine, or a second finding: judged as they are
+    assert not _device_fell_silent({**row, "injected": "probe_framing"})
+    assert not _device_fell_silent({**row, "injected": "cpu_hog"})
+    assert not _device_fell_silent({**row, "violations": row["violations"] + "; the log is cut"})
+    ft = "stopped though no fault called for it: 'FT-150 stream at 127.0.0.1:5: no new sample for 250 ms'"
+    assert _device_fell_silent({**row, "violations": ft, "injected": "probe_garbage"})
+    assert not _device_fell_silent({**row, "violations": ft, "injected": "ft_spike"})
+    assert not _device_fell_silent({**row, "violations": "no stop after ft_nan: x"})
+
+
 def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
     # the README's campaign cut to one run per fault kind: seeds 0 to 14, whose first faults are
     # each kind there is once, each with up to two more of any kind; one run at a time, as the
@@ -82,8 +124,9 @@ def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
     # cap: seen in CI with the rest of the suite on both cores) did not inject them all; it is run
     # again alone from its seed, as the README tells a user, so that every kind is exercised.
     # A run with a violation is allowed only where the machine held the emulated devices (which
-    # stand for hardware of their own) back for RIG_STALL_S or more; it too is run again, and
-    # must then keep every invariant.
+    # stand for hardware of their own) back for RIG_STALL_S or more, or where an emulated device's
+    # stream fell silent with no fault of ours on it (`_device_fell_silent`); it too is run again,
+    # and must then keep every invariant.
     for row in rows:
         drawn = {f.kind for f in campaign.draw_faults(int(row["seed"]), kinds)}
         machine_stopped = row["machine_stop"] == "1" and drawn - set(row["injected"].split())

@@ -242,6 +242,7 @@ class Run:
     machine_stop: bool = False  # stopped by a stream the machine starved, before any fault of ours
     # the longest time the emulated devices (the world's loop, the UR controller's) stood still [s]
     rig_stall_s: float = math.nan
+    probe_refused: int = 0  # the probe's frames its pseudo-terminal refused (RehearsalWorld)
     violations: list[str] = field(default_factory=list)
 
     def row(self) -> dict[str, object]:
@@ -268,6 +269,7 @@ class Run:
                 )
             },
             "rig_stall_ms": _ms(self.rig_stall_s),
+            "probe_refused": self.probe_refused,
             "wall_s": round(self.wall_s, 2),
             "violations": "; ".join(self.violations),
         }
@@ -553,6 +555,7 @@ def run_one(
                     *(1e-3 * float(m[1]) for _, text in ur.events if (m := _STALLED.match(text))),
                 ]
             )
+            run.probe_refused = world.probe_refused()
             for hog in hogs:
                 hog.stop()
             monitor.done.set()

@@ -245,8 +245,9 @@ class _World:
         self.injections = injections
         # the loop's longest stall [s] and the world time it began at (RehearsalWorld.stall), the
         # world time after the arm's last moving tick (RehearsalWorld.last_moving) and after the
-        # last tick whose command asked it to move (RehearsalWorld.last_commanded)
-        self.health = health if health is not None else [0.0, math.nan, math.nan, math.nan]
+        # last tick whose command asked it to move (RehearsalWorld.last_commanded), and the probe's
+        # frames the pseudo-terminal refused whole or in part (RehearsalWorld.probe_refused)
+        self.health = health if health is not None else [0.0, math.nan, math.nan, math.nan, 0.0]
         self.ending: dict[str, float] = {}  # world time at which a fault of that kind ends
         self.ft_stalled = self.protective = self.program_stopped = False
         self.ft_nan = self.nan_next = False
@@ -291,8 +292,12 @@ class _World:
     def _send_probe(self, data: bytes) -> None:
         if self.pty_master is None:
             return
-        with contextlib.suppress(OSError):  # BlockingIOError: the buffer is full, nobody reads
-            os.write(self.pty_master, data)
+        try:
+            written = os.write(self.pty_master, data)
+        except OSError:  # BlockingIOError: the buffer is full, nobody reads
+            written = 0
+        if written < len(data):  # a device drops what its line does not take; counted
+            self.health[4] += 1.0
 
     def _fault(self, kind: str, t: float, duration_s: float = 0.0) -> None:
         if duration_s > 0.0:
@@ -532,7 +537,7 @@ class RehearsalWorld:
         self._ready = context.Queue()
         self._stop = context.Event()
         self._injections = context.Queue()
-        self._health = context.RawArray("d", [0.0, math.nan, math.nan, math.nan])
+        self._health = context.RawArray("d", [0.0, math.nan, math.nan, math.nan, 0.0])
         self._process = context.Process(
             target=_world_main,
             args=(
@@ -598,6 +603,11 @@ class RehearsalWorld:
         motion (a twist not zero), NaN if never: what tells a late standstill's two causes apart,
         a late command to rest or an arm that did not follow it."""
         return float(self._health[3])
+
+    def probe_refused(self) -> int:
+        """How many of the probe's frames its pseudo-terminal refused, whole or in part (the
+        world writes without blocking and drops what the line does not take, as a device would)."""
+        return int(self._health[4])
 
     def stop(self) -> None:
         self._stop.set()
