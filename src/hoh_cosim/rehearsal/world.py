@@ -66,6 +66,11 @@ WORLD_DT = 1e-3
 _STATE = 3 + 9 + 6 + 6 + 6 + 6 + 6 + 3
 _NO_ACCELERATION = np.zeros(1)
 _COMMAND = 6 + 4 + 1  # twist, [acceleration, kick time, stop, sequence], the task's go
+# the world's health before its first tick: the loop's longest stall [s] and the world time it
+# began at (RehearsalWorld.stall), the world time after the arm's last moving tick (last_moving)
+# and after the last tick whose command asked it to move (last_commanded), the probe's frames the
+# pseudo-terminal refused whole or in part (probe_refused)
+_HEALTH = (0.0, math.nan, math.nan, math.nan, 0.0)
 TASK_LEAD_S = 0.5
 """[s] With no `task_start_s`, the hand takes the handle this long after `start_task()`."""
 _HELD = 1e9  # [s] a task start that waits for start_task()
@@ -243,11 +248,7 @@ class _World:
         self.pty_name = os.ttyname(slave)
         self.faults = sorted(setup.faults, key=lambda f: f.at_s)
         self.injections = injections
-        # the loop's longest stall [s] and the world time it began at (RehearsalWorld.stall), the
-        # world time after the arm's last moving tick (RehearsalWorld.last_moving) and after the
-        # last tick whose command asked it to move (RehearsalWorld.last_commanded), and the probe's
-        # frames the pseudo-terminal refused whole or in part (RehearsalWorld.probe_refused)
-        self.health = health if health is not None else [0.0, math.nan, math.nan, math.nan, 0.0]
+        self.health = health if health is not None else list(_HEALTH)  # _HEALTH says what
         self.ending: dict[str, float] = {}  # world time at which a fault of that kind ends
         self.ft_stalled = self.protective = self.program_stopped = False
         self.ft_nan = self.nan_next = False
@@ -537,7 +538,7 @@ class RehearsalWorld:
         self._ready = context.Queue()
         self._stop = context.Event()
         self._injections = context.Queue()
-        self._health = context.RawArray("d", [0.0, math.nan, math.nan, math.nan, 0.0])
+        self._health = context.RawArray("d", _HEALTH)
         self._process = context.Process(
             target=_world_main,
             args=(
