@@ -67,8 +67,9 @@ def _rig_stalled(row: dict) -> bool:
     return row["rig_stall_ms"] != "" and float(row["rig_stall_ms"]) >= 1e3 * campaign.RIG_STALL_S
 
 
+# a stream's stale stop, named as the campaign's causes name the two streams
 _SILENT = re.compile(
-    r"^stopped though no fault called for it: '(?P<stream>FT-150 stream at|FSE103 on) \S+: "
+    rf"^stopped though no fault called for it: '(?:(?P<ft>{campaign._FT})|{campaign._PROBE}): "
     r"no new sample for \d+ ms"
 )
 
@@ -83,7 +84,7 @@ def _device_fell_silent(row: dict) -> bool:
     match = _SILENT.match(violation)
     if more or match is None:
         return False
-    prefix = "ft_" if match["stream"].startswith("FT-150") else "probe_"
+    prefix = "ft_" if match["ft"] else "probe_"
     if prefix == "probe_" and row["probe_refused"] != "0":
         return False  # the terminal was full: the runner did not read it, which is the runner's
     return not any(k.startswith(prefix) or k == "cpu_hog" for k in row["injected"].split())
