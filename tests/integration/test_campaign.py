@@ -67,8 +67,12 @@ def _rig_stalled(row: dict) -> bool:
     return row["rig_stall_ms"] != "" and float(row["rig_stall_ms"]) >= 1e3 * campaign.RIG_STALL_S
 
 
-# a stream's stale stop, named as the campaign's causes name the two streams
-_SILENT = re.compile(rf"^(?:(?P<ft>{campaign._FT})|{campaign._PROBE}): no new sample for \d+ ms")
+# a stream's stale stop whose reader got no byte since its last sample, the streams named as the
+# campaign's causes name them (bytes that made no sample would be the parser's finding)
+_SILENT = re.compile(
+    rf"^(?:(?P<ft>{campaign._FT})|{campaign._PROBE}): no new sample for \d+ ms "
+    r"\(the stream stalled: no byte read since its last sample[;)]"
+)
 
 
 def _device_fell_silent(row: dict) -> bool:
@@ -76,7 +80,9 @@ def _device_fell_silent(row: dict) -> bool:
     of ours on that stream or on the machine: the runner stopped, as it must when a device goes
     quiet, and the device is the rig's. Seen in suite runs, always the FSE103's pseudo-terminal;
     in the first whose files were kept (seed 0) its frames stopped arriving 0.1 s into the session
-    while the world's loop (1.2 ms at most between turns) and the FT-150's TCP stream kept time."""
+    while the world's loop (1.2 ms at most between turns) and the FT-150's TCP stream kept time.
+    The runner's stop says its reader read no byte since: bytes that made no sample would be our
+    parser's finding, not the rig's."""
     match = _SILENT.match(row["cause"])
     if (
         match is None
@@ -94,8 +100,14 @@ def test_only_a_device_silent_on_its_own_is_taken_for_the_rigs():
         found = f"stopped though no fault called for it: {cause!r}" + more
         return {"cause": cause, "violations": found, "injected": injected, "probe_refused": refused}
 
-    probe = "FSE103 on /dev/pts/0: no new sample for 250 ms (the stream stalled)"
+    quiet = "the stream stalled: no byte read since its last sample"
+    probe = f"FSE103 on /dev/pts/0: no new sample for 250 ms ({quiet})"
     assert _device_fell_silent(row(probe))
+    # bytes that made no sample: the parser's, not the rig's
+    garbled = "412 bytes read since its last sample, the last 3 ms ago, 0 bad frames"
+    assert not _device_fell_silent(
+        row(probe.replace("no byte read since its last sample", garbled))
+    )
     assert _device_fell_silent(row(probe, "ft_garbage rtde_drop"))
     # with starved time in its cause (seen: seed 0), which repr quotes in double quotes
     starved = probe[:-1] + "; 1 ms of it with this machine's ordinary tasks starved)"
@@ -106,7 +118,7 @@ def test_only_a_device_silent_on_its_own_is_taken_for_the_rigs():
     assert not _device_fell_silent(row(probe, "probe_framing"))
     assert not _device_fell_silent(row(probe, "cpu_hog"))
     assert not _device_fell_silent(row(probe, more="; the log is cut"))
-    ft = "FT-150 stream at 127.0.0.1:5: no new sample for 250 ms (the stream stalled)"
+    ft = f"FT-150 stream at 127.0.0.1:5: no new sample for 250 ms ({quiet})"
     assert _device_fell_silent(row(ft, "probe_garbage"))
     assert not _device_fell_silent(row(ft, "ft_spike"))
     nan = "FT-150 stream at 127.0.0.1:5 sent a non-finite value"

@@ -216,6 +216,36 @@ def test_garbage_mid_stream_is_counted_and_the_stream_goes_on():
             assert wait_for(lambda: stats.bytes == 20 * stats.frames + len(garbage))
 
 
+def test_a_quiet_stream_says_whether_its_bytes_stopped_or_made_no_sample():
+    with open_pty() as p:
+        port = FSE103Port(p.name)
+        with running(port):
+            assert wait_for(lambda: port.connected)
+            for k in range(3):
+                frame = encode_frame(forces(k), T0_MS + k, framing="seed18", byte_order="little")
+                os.write(p.master, frame)
+            assert wait_for(lambda: port.mailbox.latest()[1] == 3)
+            assert port.mailbox.since_latest(time.monotonic()) == (
+                "no byte read since its last sample"
+            )
+            garbage = b"junk!" * 12  # 60 bytes without a start byte: bad frames
+            sent = time.monotonic()
+            os.write(p.master, garbage)
+            assert wait_for(lambda: port.mailbox.stats.bytes == 3 * 18 + len(garbage))
+            time.sleep(0.05)
+            quiet = port.mailbox.since_latest(time.monotonic())
+            match = re.fullmatch(
+                r"60 bytes read since its last sample, the last (\d+) ms ago, (\d+) bad frames",
+                quiet,
+            )
+            assert match, quiet
+            assert 50 <= int(match[1]) <= 1e3 * (time.monotonic() - sent) + 1
+            # the parser keeps a frame's length back until the next start byte: it cannot know
+            # more would not complete a frame
+            assert int(match[2]) == port.mailbox.stats.bad_frames >= 2
+            assert port.mailbox.latest()[1] == 3
+
+
 def test_raw_frames_are_counted_not_published():
     with open_pty() as p:
         port = FSE103Port(p.name)

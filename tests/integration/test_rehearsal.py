@@ -174,7 +174,8 @@ def faults_at(kind: str) -> tuple[Fault, ...]:
         # 2 ms cycles: 250 ms, or 252 ms when the rounding leaves the 125th cycle just short
         pytest.param(
             "ft_stall",
-            r"FT-150 stream at \S+: no new sample for 25[02] ms \(the stream stalled\)",
+            r"FT-150 stream at \S+: no new sample for 25[02] ms "
+            r"\(the stream stalled: no byte read since its last sample\)",
             id="ft_stall",
         ),
         pytest.param(

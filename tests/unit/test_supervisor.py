@@ -245,6 +245,35 @@ def test_silence_while_ordinary_tasks_were_starved_is_not_counted(flag, age_port
     )
 
 
+def test_a_stale_streams_stop_says_what_its_reader_got_since_its_last_sample():
+    quiet = {
+        Status.STALE_PROBE: "60 bytes read since its last sample, the last 3 ms ago, 2 bad frames",
+        Status.STALE_FT: "no byte read since its last sample",
+    }
+    verdict = verdict_of(
+        Status.STALE_PROBE, HELD, estimate={"probe_age": 0.4}, starved={}, quiet=quiet
+    )
+    assert_stopped(
+        verdict,
+        f"{PROBE}: no new sample for 400 ms (the stream stalled: 60 bytes read since its last "
+        "sample, the last 3 ms ago, 2 bad frames)",
+    )
+    # before the starved time, which the campaign's checker reads at the end; beside an error
+    verdict = verdict_of(
+        Status.STALE_FT,
+        HELD,
+        estimate={"ft_age": 0.4},
+        starved={Status.STALE_FT: 0.1},
+        quiet=quiet,
+        ft_error="socket timed out",
+    )
+    assert_stopped(
+        verdict,
+        f"{FT}: no new sample for 400 ms (socket timed out: no byte read since its last sample; "
+        f"100 {STARVED_TEXT})",
+    )
+
+
 def test_a_starved_machine_defers_a_stop_only_up_to_stale_stop_max_s():
     policy = SessionPolicy(LimitParams(), stale_stop_max_s=0.8, ft=FT, probe=PROBE)
     starved = {Status.STALE_PROBE: 10.0}  # starved all along (and then some: clipped to the age)

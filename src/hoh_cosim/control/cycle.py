@@ -167,12 +167,14 @@ def control_cycle(
     probe_error: str | None = None,
     overload: str | None = None,
     starved: Mapping[Status, float] | None = None,
+    quiet: Mapping[Status, str] | None = None,
 ) -> Cycle:
     """Estimator, controller and supervisor on one cycle's reading (the block contract's time:
     `t` is the cycle number times `dt`). `ft_error` and `probe_error` are what the streams'
     readers last reported, `overload` how starved the CPU was while a stream was stale, for the
     supervisor's message, and `starved` how long ordinary tasks were starved since each stale
-    stream turned stale (`supervise`)."""
+    stream turned stale and what each stale stream's reader got since its last sample
+    (`supervise`)."""
     estimator, controller = blocks.estimator, blocks.controller
     blocks._ft_counter[0] = reading.ft_count
     blocks._probe_counter[0] = reading.probe_count
@@ -204,6 +206,7 @@ def control_cycle(
         probe_error=probe_error,
         overload=overload,
         starved=starved,
+        quiet=quiet,
     )
     return Cycle(reading, estimate, command, verdict, events)
 

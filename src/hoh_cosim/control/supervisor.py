@@ -354,6 +354,7 @@ def supervise(
     probe_error: str | None = None,
     overload: str | None = None,
     starved: Mapping[Status, float] | None = None,
+    quiet: Mapping[Status, str] | None = None,
 ) -> Verdict:
     """Decide one cycle of a session: send the controller's twist, send zero, or end the session.
 
@@ -363,11 +364,21 @@ def supervise(
     errors what the streams' readers last reported, for the message, and `overload` how starved the
     machine's CPU was while a stream was stale (None: not measured, or not starved), and
     `starved` for each stale stream's flag how long ordinary tasks were starved since it turned
-    stale [s] (the module's docstring)."""
+    stale [s] (the module's docstring), and `quiet` for each stale stream's flag what its reader
+    got since its last sample (bytes or none), which a stop's message carries."""
     if checking:
         status &= ~Status.NOT_READY
     cause = _stop_cause(
-        policy, status, estimate, ft, probe, ft_error, probe_error, overload, starved or {}
+        policy,
+        status,
+        estimate,
+        ft,
+        probe,
+        ft_error,
+        probe_error,
+        overload,
+        starved or {},
+        quiet or {},
     )
     if cause is None:
         cause = _command_cause(policy.limits, twist_B)
@@ -384,6 +395,7 @@ def _stop_cause(
     probe_error: str | None,
     overload: str | None,
     starved: Mapping[Status, float],
+    quiet: Mapping[Status, str],
 ) -> str | None:
     for name, values in ((policy.ft, ft), (policy.probe, probe)):
         if values is not None and not np.all(np.isfinite(values)):
@@ -408,6 +420,8 @@ def _stop_cause(
                 if error is None and overload is not None:
                     error = f"{overload}: its delivery was starved, not necessarily the device"
                 why = error or "the stream stalled"
+                if flag in quiet:
+                    why += f": {quiet[flag]}"
                 if discounted >= 0.0005:
                     why += f"; {1e3 * discounted:.0f} {STARVED_TEXT}"
                 return f"{name}: no new sample for {1e3 * age:.0f} ms ({why})"

@@ -55,7 +55,14 @@ from hoh_cosim.hardware.config import HardwareConfig
 from hoh_cosim.hardware.pressure import Canary, CpuPressure
 from hoh_cosim.hardware.robot import Robot, RobotState, named_problem
 from hoh_cosim.hardware.session_log import CycleRecord, SessionLog, at_log_resolution
-from hoh_cosim.hardware.streams import Mailbox, RateCheck, ReaderThread, Sample, robust_period
+from hoh_cosim.hardware.streams import (
+    Mailbox,
+    RateCheck,
+    ReaderThread,
+    Sample,
+    now,
+    robust_period,
+)
 from hoh_cosim.params import leaves
 
 __all__ = [
@@ -504,6 +511,7 @@ class Runner:
                 probe_error=self.probe.mailbox.error if self.probe is not None else None,
                 overload=pressure.overload() if since else None,
                 starved=self._starved_since(since),
+                quiet=self._quiet(since),
             )
             was_stale = bool(since)
             if was_stale or cycle.verdict.status & _STALE:
@@ -556,6 +564,18 @@ class Runner:
         if not since or self._canary is None:
             return None
         return {flag: self._canary.since(mark) for flag, mark in since.items()}
+
+    def _quiet(self, since: dict[Status, tuple[float, ...]]) -> dict[Status, str] | None:
+        """For each stale stream, what its reader got since its last sample."""
+        if not since:
+            return None
+        t = now()
+        readers = {Status.STALE_FT: self.ft, Status.STALE_PROBE: self.probe}
+        return {
+            flag: reader.mailbox.since_latest(t)
+            for flag in since
+            if (reader := readers[flag]) is not None
+        }
 
     def _not_counted(self, flag: Status, discounted: float, policy: SessionPolicy) -> None:
         """Log the starved time a stream that came back did not have counted as its silence."""

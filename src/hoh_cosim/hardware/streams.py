@@ -43,6 +43,7 @@ class StreamStats:
     bad_frames: int = 0
     nonfinite: int = 0  # samples with a NaN or an infinity (kept out of mean and std)
     bytes: int = 0
+    last_bytes_s: float = math.nan  # when the last read that brought bytes returned (monotonic)
     losses: int = 0  # failures: connections lost, devices gone, attempts refused
     reconnects: int = 0  # successful connections after the first
     first_s: float = math.nan
@@ -97,12 +98,37 @@ class Mailbox:
         self.stats = StreamStats()
         self.error: str | None = None  # why the stream is down, while it is
         self.last_error: str | None = None  # the latest reason it went down, kept after recovery
+        self._bytes_at_latest = 0  # stats.bytes and stats.bad_frames when the latest sample came
+        self._bad_at_latest = 0
+
+    def received(self, n: int) -> None:
+        """Count `n` bytes the reader has just read (before it parses them)."""
+        with self._lock:
+            self.stats.bytes += n
+            self.stats.last_bytes_s = now()
 
     def publish(self, sample: Sample) -> None:
         with self._lock:
             self._latest = sample
             self._count += 1
             self.stats.add(sample)
+            self._bytes_at_latest = self.stats.bytes
+            self._bad_at_latest = self.stats.bad_frames
+
+    def since_latest(self, t: float) -> str:
+        """What the reader got after the read that brought the latest sample, at time `t`
+        (monotonic): for a stream gone quiet, whether its bytes stopped (the device, the line, the
+        kernel's delivery) or came and made no sample (the framing, garbage)."""
+        with self._lock:
+            n = self.stats.bytes - self._bytes_at_latest
+            bad = self.stats.bad_frames - self._bad_at_latest
+            last = self.stats.last_bytes_s
+        if n == 0:
+            return "no byte read since its last sample"
+        return (
+            f"{n} bytes read since its last sample, the last {1e3 * (t - last):.0f} ms ago, "
+            f"{bad} bad frames"
+        )
 
     def latest(self) -> tuple[Sample | None, int]:
         """(the newest sample or None, how many samples have arrived so far)."""
@@ -174,7 +200,7 @@ class ReaderThread(threading.Thread):
                         continue
                     if not data:
                         raise ConnectionError("the device closed the connection")
-                    self.mailbox.stats.bytes += len(data)
+                    self.mailbox.received(len(data))
                     self._handle(data)
             except Exception as exc:  # a reader must never die silently: say why, then retry
                 if self._halt.is_set():
