@@ -32,8 +32,9 @@ from hoh_cosim.fmi.build import ensure_fmus
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ("circles", "contact_scan")
-# long enough for the metrics' windows: the hand takes the handle at 3 s, a circle lasts 4 s
-DURATION_S = 12.0
+# long enough for the metrics' windows: the hand takes the handle at 3 s, a circle lasts 4 s, and
+# the contact scan's force figures need 9 s (at 8 s they are not computed)
+DURATION_S = 9.0
 # metrics of the sensor chain's delay: Jacobi adds a source step on each connection from the hand
 # to the estimate, operator (2 ms) -> plant -> ft150 (1 ms) -> estimator: about 4 ms (measured 3.9)
 CHAIN_DELAY_MS = 4.0
