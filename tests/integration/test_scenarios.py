@@ -323,6 +323,22 @@ def test_hold_on_release_keeps_the_breathing_contact_and_hands_back():
     assert m["hold_contact_force_std_N"] < 0.5
     assert m["handbacks"] >= 1
     assert m["handback_jump_m"] < 0.003
+    # The force held with the hand off against the force at the release (its mean over the 0.5 s
+    # before the hand began to open at 13 s; held from 1 s after it was off until the retake).
+    # The hold regulates the wrist's force, in which the hand resting on the handle when the hold
+    # engaged is: the hand's opening takes its push off the contact, and no more than that
+    # (docs/decisions.md, "The force the hold keeps").
+    t = rec.time
+    d = np.array([0.0, 0.0, -1.0])  # clinical_assisted's pressing direction
+    pressing = -rec["plant.F_contact_B"] @ d
+    holding = (status & int(Status.HOLDING)) != 0
+    before = (t >= 12.4) & (t < 12.9)
+    after = (t >= 14.1) & (t < 19.0) & holding
+    change = float(np.mean(pressing[after]) - np.mean(pressing[before]))
+    assert m["hold_contact_force_change_N"] == pytest.approx(change, abs=0.05)
+    push = float(np.mean(rec["operator.F_hand_B"][before] @ d))  # the hand's share, along it
+    assert push > 0.5
+    assert -push - 0.5 < m["hold_contact_force_change_N"] < 0.5
     # the hand off, a still robot: the breath's 10 mm on about 1200 N/m
     rec_still, m_still = run()
     assert m_still["hold_s"] == 0.0

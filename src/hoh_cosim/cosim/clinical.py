@@ -28,7 +28,11 @@ the robot (a `plant`) or freehand (a `freehand` probe), on a phantom that may br
   one): `hold_s` how long the robot held the contact (the HOLDING flag); `hold_contact_force_std_N`
   the std of the phantom's force along the pressing direction while it held with the hand off the
   handle (operator.F_hand_B zero), from `HOLD_SETTLE_S` after the hand let go: the force through
-  the breaths with nobody holding the probe; `hold_contact_losses` the times the tip left the
+  the breaths with nobody holding the probe; `hold_contact_force_change_N` how far the hold moved
+  that force from its value at the release (the issue's "at its value at release"): its mean over
+  the same hands-off window less its mean over the `RELEASE_WINDOW_S` before the hand began to
+  open (`operator.let_go_ramp_s` before it was off), the largest in size over the run's let-gos,
+  signed (negative: the hold let the contact fall); `hold_contact_losses` the times the tip left the
   phantom while the robot held; `handbacks` the hand-backs (a touch of the handle: the
   HANDING_BACK flag), `handback_jump_m` the farthest the tip moved from where it was at a
   hand-back's start during its blend (the largest over the run's hand-backs): it holds the hand's
@@ -74,9 +78,13 @@ GOAL_HOLD_S = 0.5
 HOLD_SETTLE_S = 1.0
 """[s] After the hand let go, the hold takes over the hand's share of the force (the opening hand
 is a 0.1 s step of a few newtons); the force's std is measured from then."""
+RELEASE_WINDOW_S = 0.5
+"""[s] The contact force at the release is its mean over this long before the hand began to open:
+the hand's press loop, not one instant of its tremor."""
 HOLD_METRICS = (
     "hold_s",
     "hold_contact_force_std_N",
+    "hold_contact_force_change_N",
     "hold_contact_losses",
     "handbacks",
     "handback_jump_m",
@@ -301,6 +309,15 @@ def _hold_metrics(
     window = holding & settled
     if np.count_nonzero(window) > 1:
         m["hold_contact_force_std_N"] = float(np.std(pressing[window]))
+    changes = []
+    for a, b in _runs(off):
+        held = window[a:b]
+        opened = t[a] - op.params.let_go_ramp_s  # the hand began to open
+        before = (t >= opened - RELEASE_WINDOW_S) & (t < opened)
+        if np.count_nonzero(held) > 1 and np.count_nonzero(before) > 1:
+            changes.append(float(np.mean(pressing[a:b][held]) - np.mean(pressing[before])))
+    if changes:
+        m["hold_contact_force_change_N"] = max(changes, key=abs)
     episodes = _runs(back)
     m["handbacks"] = len(episodes)
     if episodes:

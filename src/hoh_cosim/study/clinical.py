@@ -661,7 +661,7 @@ def _summary(
             per_mode[mode] = entry
         tasks[task] = per_mode
     # hold-on-release, per task whose hand lets go: the force through the breaths while the robot
-    # held with the hand off, the contact losses while it held, the tip's jump at the hand-backs
+    # held with the hand off and how far from its value at the release, the contact losses while it held, the tip's jump at the hand-backs
     hold: dict[str, Any] = {}
     for name, task in TASKS.items():
         if (task.quick_hand_off if quick else task.hand_off) is None:
@@ -672,6 +672,7 @@ def _summary(
 
         hold[name] = {
             "contact_force_std_N": _stats_of(held("hold_contact_force_std_N")),
+            "contact_force_change_N": _stats_of(held("hold_contact_force_change_N")),
             "contact_losses": _stats_of(held("hold_contact_losses")),
             "handback_jump_m": _stats_of(held("handback_jump_m")),
             "handback_unasked_m": _stats_of(held("handback_unasked_m")),
@@ -1053,6 +1054,7 @@ def _sections(
         [
             task,
             _range_of(e["contact_force_std_N"], ".2f"),
+            _range_of(e["contact_force_change_N"], "+.2f"),
             _f(sum(e["contact_losses"]["per_operator"]), ".0f"),
             _range_of(e["handback_jump_m"], ".2f", 1e3),
             _range_of(e["handback_unasked_m"], ".2f", 1e3),
@@ -1067,6 +1069,7 @@ def _sections(
             [
                 "task",
                 "contact force std, hands off [N]",
+                "hands-off force less the force at the release [N]",
                 "contact losses while held (all)",
                 "hand-back tip travel in the blend [mm]",
                 "of it not asked by the hand, across [mm]",
