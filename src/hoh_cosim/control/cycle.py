@@ -172,8 +172,8 @@ def control_cycle(
     """Estimator, controller and supervisor on one cycle's reading (the block contract's time:
     `t` is the cycle number times `dt`). `ft_error` and `probe_error` are what the streams'
     readers last reported, `overload` how starved the CPU was while a stream was stale, for the
-    supervisor's message, and `starved` how long ordinary tasks were starved since each stale
-    stream turned stale and what each stale stream's reader got since its last sample
+    supervisor's message, `starved` how long ordinary tasks were starved since each stale stream
+    turned stale, and `quiet` what each stale stream's reader got since its last sample
     (`supervise`)."""
     estimator, controller = blocks.estimator, blocks.controller
     blocks._ft_counter[0] = reading.ft_count

@@ -661,7 +661,8 @@ def _summary(
             per_mode[mode] = entry
         tasks[task] = per_mode
     # hold-on-release, per task whose hand lets go: the force through the breaths while the robot
-    # held with the hand off and how far from its value at the release, the contact losses while it held, the tip's jump at the hand-backs
+    # held with the hand off and how far from its value at the release, the contact losses while
+    # it held, the tip's jump at the hand-backs
     hold: dict[str, Any] = {}
     for name, task in TASKS.items():
         if (task.quick_hand_off if quick else task.hand_off) is None:
