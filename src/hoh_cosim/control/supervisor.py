@@ -365,7 +365,8 @@ def supervise(
     machine's CPU was while a stream was stale (None: not measured, or not starved), and
     `starved` for each stale stream's flag how long ordinary tasks were starved since it turned
     stale [s] (the module's docstring), and `quiet` for each stale stream's flag what its reader
-    got since its last sample (bytes or none), which a stop's message carries."""
+    got since its last sample (bytes or none), which a stop's message carries where the reader
+    gave no reason of its own."""
     if checking:
         status &= ~Status.NOT_READY
     cause = _stop_cause(
@@ -417,10 +418,11 @@ def _stop_cause(
             age = float(estimate[age_port][0])
             discounted = min(age, max(0.0, starved.get(flag, 0.0)))
             if age - discounted >= policy.stale_stop_s or age >= policy.stale_stop_max_s:
+                said = error  # the reader's own reason, which says more than its byte count
                 if error is None and overload is not None:
                     error = f"{overload}: its delivery was starved, not necessarily the device"
                 why = error or "the stream stalled"
-                if flag in quiet:
+                if said is None and flag in quiet:
                     why += f": {quiet[flag]}"
                 if discounted >= 0.0005:
                     why += f"; {1e3 * discounted:.0f} {STARVED_TEXT}"
