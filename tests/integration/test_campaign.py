@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from hoh_cosim.control.supervisor import STARVED_TEXT
+from hoh_cosim.hardware import fse103, ft150
 from hoh_cosim.hardware.session_log import SessionLog
 from hoh_cosim.rehearsal import campaign
 from tests.xdist_groups import REAL_TIME
@@ -67,11 +68,13 @@ def _rig_stalled(row: dict) -> bool:
     return row["rig_stall_ms"] != "" and float(row["rig_stall_ms"]) >= 1e3 * campaign.RIG_STALL_S
 
 
-# a stream's stale stop whose reader got no byte since its last sample, the streams named as the
-# campaign's causes name them (bytes that made no sample would be the parser's finding)
+# a stream's stale stop whose reader got no byte since its last sample, or less than a frame and
+# nothing bad (a frame cut short by the silence), the streams named as the campaign's causes name
+# them; bytes that made a bad frame, or a frame's worth that made no sample, are the parser's
 _SILENT = re.compile(
     rf"^(?:(?P<ft>{campaign._FT})|{campaign._PROBE}): no new sample for \d+ ms "
-    r"\(the stream stalled: no byte read since its last sample[;)]"
+    r"\(the stream stalled: (?:no byte read|(?P<bytes>\d+) bytes read) since its last sample"
+    r"(?:, the last \d+ ms ago, 0 bad frames)?[;)]"
 )
 
 
@@ -81,8 +84,9 @@ def _device_fell_silent(row: dict) -> bool:
     quiet, and the device is the rig's. Seen in suite runs, always the FSE103's pseudo-terminal;
     in the first whose files were kept (seed 0) its frames stopped arriving 0.1 s into the session
     while the world's loop (1.2 ms at most between turns) and the FT-150's TCP stream kept time.
-    The runner's stop says its reader read no byte since: bytes that made no sample would be our
-    parser's finding, not the rig's."""
+    The runner's stop says its reader read no byte since, or less than a frame and no bad one (the
+    frame the silence cut): bytes that made a bad frame or a frame's worth without a sample would
+    be our parser's finding, not the rig's."""
     match = _SILENT.match(row["cause"])
     if (
         match is None
@@ -90,6 +94,9 @@ def _device_fell_silent(row: dict) -> bool:
     ):
         return False
     prefix = "ft_" if match["ft"] else "probe_"
+    frame = ft150.MAX_FRAME_BYTES if match["ft"] else max(fse103.FRAME_LENGTHS.values())
+    if match["bytes"] is not None and int(match["bytes"]) >= frame:
+        return False
     if prefix == "probe_" and row["probe_refused"] != "0":
         return False  # the terminal was full: the runner did not read it, which is the runner's
     return not any(k.startswith(prefix) or k == "cpu_hog" for k in row["injected"].split())
@@ -103,10 +110,20 @@ def test_only_a_device_silent_on_its_own_is_taken_for_the_rigs():
     quiet = "the stream stalled: no byte read since its last sample"
     probe = f"FSE103 on /dev/pts/0: no new sample for 250 ms ({quiet})"
     assert _device_fell_silent(row(probe))
+
     # bytes that made no sample: the parser's, not the rig's
-    garbled = "412 bytes read since its last sample, the last 3 ms ago, 0 bad frames"
+    def read(text: str) -> str:
+        return probe.replace("no byte read since its last sample", text)
+
     assert not _device_fell_silent(
-        row(probe.replace("no byte read since its last sample", garbled))
+        row(read("412 bytes read since its last sample, the last 3 ms ago, 22 bad frames"))
+    )
+    assert not _device_fell_silent(
+        row(read("20 bytes read since its last sample, the last 3 ms ago, 0 bad frames"))
+    )
+    # a frame cut short by the silence: the rig's
+    assert _device_fell_silent(
+        row(read("7 bytes read since its last sample, the last 240 ms ago, 0 bad frames"))
     )
     assert _device_fell_silent(row(probe, "ft_garbage rtde_drop"))
     # with starved time in its cause (seen: seed 0), which repr quotes in double quotes
