@@ -303,14 +303,15 @@ def _hold_metrics(
     # the hand off the handle, HOLD_SETTLE_S after it let go
     off = np.linalg.norm(_signal(rec, op, "F_hand_B"), axis=1) == 0.0
     off &= t >= op.params.start_s
+    let_gos = _runs(off)
     settled = np.zeros(len(t), dtype=bool)
-    for a, b in _runs(off):
+    for a, b in let_gos:
         settled[a:b] = t[a:b] >= t[a] + HOLD_SETTLE_S
     window = holding & settled
     if np.count_nonzero(window) > 1:
         m["hold_contact_force_std_N"] = float(np.std(pressing[window]))
     changes = []
-    for a, b in _runs(off):
+    for a, b in let_gos:
         held = window[a:b]
         opened = t[a] - op.params.let_go_ramp_s  # the hand began to open
         before = (t >= opened - RELEASE_WINDOW_S) & (t < opened)
