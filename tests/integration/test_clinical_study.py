@@ -22,6 +22,7 @@ from hoh_cosim.study.clinical import (
     _shared_modes,
     study_variants,
 )
+from hoh_cosim.study.sweep import set_option
 
 # one worker runs this module (tests/xdist_groups.py): the study runs once
 pytestmark = pytest.mark.xdist_group(__name__)
@@ -174,12 +175,14 @@ def test_hold_on_release_holds_the_breathing_contact_and_hands_back(study) -> No
         for key in ("contact_force_std_N", "contact_losses", "handback_jump_m"):
             assert key in entry, (task, key)
         assert entry["contact_force_std_N"]["n"] == OPERATORS
-        # the hands-off force against the force at the release: every operator has one, a fall
-        # (the hand's push leaves the contact at its opening: 2.2-3.9 N on the full study's view,
-        # 4.3-11.7 N on its press, docs/decisions.md), never the whole press's force
+        # the hands-off force against the force at the release: every operator has one, within
+        # what the setpoint's window and the checked probe's error leave (the full study: -0.4 to
+        # +2.9 N on the view, -4.6 to +0.2 N on the press, docs/decisions.md, "The hold after the
+        # probe check"); without the check the hand's push left with its opening, 4.3-11.7 N of
+        # the press
         change = entry["contact_force_change_N"]
         assert change["n"] == OPERATORS
-        assert -15.0 < change["min"] <= change["max"] < 2.0
+        assert -6.0 < change["min"] <= change["max"] < 3.5
         # held through at least a breath with the hand off, steadier than a robot that holds
         # still (1.5-2.1 N, docs/decisions.md) and no contact lost
         assert entry["contact_force_std_N"]["max"] < 0.8, task
@@ -212,6 +215,10 @@ def test_the_probe_check_comes_first_and_takes_the_probe_sensors_error_off_the_h
         assert checked.duration_s == pytest.approx(defaults.duration_s + PROBE_CHECK_S)
         assert "estimator.probe_correction.kind=online" in checked.overrides
         assert "estimator.probe_correction.kind=online" not in defaults.overrides
+        # ... and so do the hold's: the hand's share along the probe is F̃'s to tell
+        hold = keyed[(0, task, HOLD)]
+        assert "estimator.probe_correction.kind=online" in hold.overrides
+        assert set_option("operator.start_s", 3.0 + PROBE_CHECK_S) in hold.overrides
     # Along the probe the hand pushed past the FSE103's gain error (0.15 sigma per axis) under
     # today's defaults; with the housing mapped, it does not: on the view and the press, whose
     # force is held, every operator's hand force is lower after the check (a quick study of three
@@ -238,10 +245,10 @@ def test_an_operator_is_the_same_person_and_patient_in_every_run() -> None:
         by_operator.setdefault(i, set()).add((variant.seed, person))
         assert any(o.startswith(f"{MODES[mode].grip}.grip_stiffness") for o in variant.overrides)
         # the breathing starts with the task: on the robot after the rebias (and the probe check,
-        # in the mode that has one), freehand at once
+        # in the modes that have one: the checked mode and the hold), freehand at once
         start = 0.0
         if MODES[mode].assisted:
-            start = 3.0 + (PROBE_CHECK_S if mode == "checked" else 0.0)
+            start = 3.0 + (PROBE_CHECK_S if mode in ("checked", HOLD) else 0.0)
         assert f"breathing.start_s={start}" in variant.overrides
     assert all(len(kinds) == 1 for kinds in by_operator.values())
     assert by_operator[0] != by_operator[1]
