@@ -85,6 +85,31 @@ def test_a_quiet_hand_in_contact_engages_the_hold_and_the_force_rides_the_breath
     assert before.min() - 0.5 < np.mean(late) < before.max() + 0.5
 
 
+def test_a_hand_that_pushed_on_while_held_leaves_its_level_when_still():
+    # held on a still surface; the hand then presses 1.8 N along the probe for 3 s (inside the
+    # touch band: no hand-back) and lets go. Without the retake the hold keeps its own force and
+    # the contact falls back by the push; with it the setpoint takes the contact the hand held
+    for band, kept in ((0.0, False), (1.0, True)):
+        ctl = holding_controller(retake_band_N=band)
+        patient = Patient(amplitude_m=0.0)
+        before, flags, _ = run(ctl, patient, 0.0, 4.0)
+        assert flags[-1] & int(Status.HOLDING)
+        pressed, flags, _ = run(ctl, patient, 4.0, 7.0, hand_N=1.8)
+        assert np.all(flags & int(Status.HOLDING))  # no hand-back
+        after, flags, _ = run(ctl, patient, 7.0, 10.0)
+        assert np.all(flags & int(Status.HOLDING))
+        level, held, left = before[-50:].mean(), pressed[-50:].mean(), after[-50:].mean()
+        assert held == pytest.approx(level + 1.8, abs=0.3)  # the push adds to the hold's force
+        if kept:
+            assert left == pytest.approx(held, abs=0.3), band
+        else:
+            assert left == pytest.approx(level, abs=0.3), band
+    # a push shorter than retake_push_s (a bump, the sensors' noise) sets no level
+    run(ctl, patient, 10.0, 10.5, hand_N=1.8)
+    bumped, _, _ = run(ctl, patient, 10.5, 13.0)
+    assert bumped[-50:].mean() == pytest.approx(left, abs=0.3)
+
+
 def test_a_still_robot_would_not_keep_it():
     ctl = HandGuidingController(ControllerParams(release=ReleaseParams(enabled=True)))
     forces, _, _ = run(ctl, Patient(), 0.0, 24.0)

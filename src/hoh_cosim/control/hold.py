@@ -20,6 +20,16 @@ hand does freehand, and what this block does once the hand is off the handle.
                instant is the breath's phase, the sonographer's level is its mean), clipped to
                [`contact_N`, `max_force_N`]; it moves there from the force at the engagement at
                `ramp_N_s`
+    retake     (`retake_band_N` > 0) while holding, a hand that went on pushing or pulling along
+               the axis (F̃·a beyond `retake_band_N`) for `retake_push_s` or longer held the
+               contact where it wanted it, the hold's force plus its own; once it is still (inside
+               the band) for `engage_s`, by letting go or by settling, the setpoint moves to the
+               probe sensor's axial force averaged over that push (its last `window_s`). A hold
+               that engaged on a hand easing off rather than letting go (the release detector
+               tells both) then keeps the hand's level, not the window's before it. The band must
+               be above F̃'s own error along the axis with nobody's hand, under a newton only
+               after a probe check: off by default (docs/decisions.md, "The hold after the probe
+               check")
     hold       along the probe axis a (handle to tip, from the estimator), z = p_BT·a the tip's
                depth coordinate, c the axial contact force (pressing positive):
                    m = z - (c - c_ref) / k̂         where the tip must be for c = c_ref: the surface
@@ -145,6 +155,8 @@ class HoldParams:
         "confirm_s": "s",
         "touch_tau_s": "s",
         "blend_s": "s",
+        "retake_band_N": "N",
+        "retake_push_s": "s",
         "loss_N": "N",
         "loss_s": "s",
         "loss_m": "m",
@@ -195,6 +207,10 @@ class HoldParams:
     confirm_s: float = 0.15  # [s] ... a weaker one (above one band) after this long
     touch_tau_s: float = 0.5  # [s] across the axis, F̃'s reference follows it this slowly
     blend_s: float = 0.2  # [s] the hand-back's blend
+    # [N] the retake's band along the probe (module docstring); 0: no retake. The clinical study's
+    # hold, after a probe check, sets 1 N: F̃·a with nobody's hand read -0.6 to +0.6 N there
+    retake_band_N: float = 0.0
+    retake_push_s: float = 1.0  # [s] the least push (or pull) beyond it that sets a level
     loss_N: float = 0.5  # [N] probe force under which the contact is lost
     loss_s: float = 0.2  # [s] lost this long: the hold ends
     loss_m: float = 0.003  # [m] ... or the tip moved this far along the axis while lost
@@ -222,6 +238,7 @@ class HoldParams:
             "settle_s",
             "confirm_s",
             "blend_s",
+            "retake_band_N",
             "loss_s",
         ):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
@@ -234,6 +251,7 @@ class HoldParams:
             "touch_tau_s",
             "share_window_s",
             "share_filter_s",
+            "retake_push_s",
             "ramp_N_s",
             "contact_N",
             "axial_band_N",
@@ -402,6 +420,10 @@ class ContactHold:
         self._band_key: tuple[int, int] | None = None
         self._band_value = np.zeros(3)
         self._history: deque[tuple[float, float]] = deque()  # (t, z) of the last ticks
+        self._pushes: deque[tuple[float, float]] = deque()  # (t, probe's axial force), held
+        self._push = (0.0, 0.0)  # (start, end) of the hand's last push beyond the retake band
+        self._pushing_since: float | None = None
+        self._still_since: float | None = None
         self._hand = HandShare(self.params)  # ĥ, the hand's share (force_source combined)
 
     @property
@@ -556,6 +578,9 @@ class ContactHold:
         self._p0 = z
         self._touch_since = self._t_back = self._lost_since = None
         self._quiet_since = None
+        self._pushes = deque()
+        self._push = (t, t)
+        self._pushing_since, self._still_since = None, t
         self.blend = 0.0
         self.phase = HoldPhase.HOLDING
         self.ended = HoldEnd.NONE
@@ -598,6 +623,36 @@ class ContactHold:
         F0 = self._F0 - float(self._F0.dot(a)) * a
         self._ref[which] = np.minimum(np.maximum(ref, F0 - band), F0 + band)
         return max(n_across, (along - low) / p.axial_band_N)
+
+    def _retake(self, t: float, push: float, c_probe: float) -> None:
+        """One tick of the retake (module docstring): `push` F̃·a, `c_probe` the probe's axial
+        force."""
+        p = self.params
+        pushes = self._pushes
+        pushes.append((t, c_probe))
+        while t - pushes[0][0] > p.window_s + p.engage_s + 0.5:
+            pushes.popleft()
+        if abs(push) > p.retake_band_N:
+            if self._pushing_since is None:
+                start, end = self._push
+                # still for less than engage_s in between: the same push (a hand opening
+                # crosses the band and its filters' lag takes F̃ out again for 0.2 s)
+                self._pushing_since = start if end > start and t - end < p.engage_s else t
+            self._still_since = None
+            return
+        if self._still_since is None:
+            self._still_since = t
+            if self._pushing_since is not None:
+                self._push = (self._pushing_since, t)
+            self._pushing_since = None
+        start, end = self._push
+        if end - start >= p.retake_push_s - 1e-9 and t - self._still_since >= p.engage_s - 1e-9:
+            since = max(start, end - p.window_s)
+            values = [c for when, c in pushes if since <= when < end]
+            if values:
+                level = sum(values) / len(values)
+                self.target_N = min(max(level, p.contact_N), p.max_force_N)
+            self._push = (t, t)
 
     def _end(self, why: HoldEnd) -> None:
         self.phase = HoldPhase.OFF
@@ -669,6 +724,8 @@ class ContactHold:
 
         c, probe = self.regulated(F_meas_B, F_probe_B, a, F_probe_meas_B, t, dt)
         self.force_N = c
+        if p.retake_band_N > 0.0 and self.phase == HoldPhase.HOLDING:
+            self._retake(t, float(F.dot(a)), -float(F_probe_B.dot(a)))
         age = (probe_age if probe else ft_age) + p.latency_s
         z_d = self._delayed(t, z, age - p.latency_s)
         v_hold = self._law(dt, c, z, z_d, age) * a

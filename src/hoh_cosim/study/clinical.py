@@ -245,13 +245,17 @@ HOLD_ON_RELEASE = (
     "controller.release.enabled=true",
     "controller.hold.enabled=true",
     "controller.hold.force_source=wrist",
+    # the probe checked, F̃ along the probe is right within a newton: a hand that went on pushing
+    # or pulling while the robot held leaves its level when it is still (`retake_band_N`)
+    "controller.hold.retake_band_N=1.0",
 )
 """Hold-on-release (`hoh_cosim.control.hold`) on today's defaults after a probe check, with the
 release detection that tells it the hand let go, regulating the wrist sensor's force
 (`force_source` wrist, as on the robot). The check comes first because the hold tells a hand on
 the handle from none by F̃ along the probe, which the FSE103's gain error otherwise fills: without
 it the hold engaged under a hand still pushing 1.4-5.2 N, and the contact fell by that push at
-every let-go (docs/decisions.md, "The force the hold keeps"). The combined force, better on three
+every let-go (docs/decisions.md, "The force the hold keeps"). With it, the hold also takes the
+level a hand left by pushing on while held (the retake, 1 N band). The combined force, better on three
 operators' quick runs, was worse over the full study's twenty on every count but the press's
 jitter: docs/decisions.md, "Hold-on-release"."""
 
