@@ -255,8 +255,8 @@ release detection that tells it the hand let go, regulating the wrist sensor's f
 the handle from none by F̃ along the probe, which the FSE103's gain error otherwise fills: without
 it the hold engaged under a hand still pushing 1.4-5.2 N, and the contact fell by that push at
 every let-go (docs/decisions.md, "The force the hold keeps"). With it, the hold also takes the
-level a hand left by pushing on while held (the retake, 1 N band). The combined force, better on three
-operators' quick runs, was worse over the full study's twenty on every count but the press's
+level a hand left by pushing on while held (the retake, 1 N band). The combined force, better on
+three operators' quick runs, was worse over the full study's twenty on every count but the press's
 jitter: docs/decisions.md, "Hold-on-release"."""
 
 
