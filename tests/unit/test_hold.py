@@ -267,3 +267,114 @@ def test_the_hand_share_follows_a_hands_step_and_not_the_probes_play():
 def test_hold_params_reject_an_unknown_force_source():
     with pytest.raises(ConfigError, match="force_source"):
         HoldParams(force_source="elbow")
+
+
+TILT = np.radians(12.0)  # the surface's normal from the probe axis (the study's press: 11.8°)
+NORMAL = np.array([-np.sin(TILT), 0.0, np.cos(TILT)])  # outward, up the slope's side
+
+
+class SlopedPatient:
+    """A plane tilted 12° under the vertical probe, breathing along its normal, with the phantom's
+    friction (`plant_models.tissue`: μ F_n tanh(|v_t| / 1 mm/s) against the slip): the contact
+    force on the probe is F_n n + friction, which both sensors read; the probe sensor's reading
+    follows it with a first-order lag `lag_s` (its filter), the wrist's at once."""
+
+    def __init__(self, amplitude_m: float = 0.01, lag_s: float = DT) -> None:
+        self.p = np.array([0.3, 0.0, 0.3 - 0.010])  # the tip, about 10 mm into the surface
+        self.amplitude = amplitude_m
+        self.contact = np.zeros(3)
+        self.slips: list[float] = []
+        self.frictions: list[float] = []
+        self.kick = np.zeros(3)  # an extra force across (friction turning over at a let-go)
+        self.kick_rate = np.zeros(3)  # [N/s] ... growing this fast
+        self.kick_until = 0.0  # [s] ... until then
+        self.reading = np.zeros(3)
+        self.lag = lag_s
+
+    def depth(self, t: float) -> float:
+        offset = self.amplitude * np.sin(2 * np.pi * 0.25 * t)
+        return float((np.array([0.3, 0.0, 0.3]) + offset * NORMAL - self.p) @ NORMAL)
+
+    def step(self, t: float, v: np.ndarray) -> None:
+        slip = v - (v @ NORMAL) * NORMAL  # the surface moves along its normal only
+        self.slips.append(float(np.linalg.norm(slip)))
+        F_n = K * max(self.depth(t), 0.0)
+        speed = float(np.linalg.norm(slip))
+        friction = -0.2 * F_n * np.tanh(speed / 1e-3) * slip / speed if speed > 0 else 0.0
+        if t < self.kick_until:
+            self.kick = self.kick + self.kick_rate * DT
+        self.contact = F_n * NORMAL + friction + self.kick
+        self.frictions.append(float(np.linalg.norm(friction)))
+        self.p = self.p + v * DT
+
+    def inputs(self, hand_x_N: float = 0.0) -> dict:
+        hand = np.array([hand_x_N, 0.0, 0.0])
+        self.reading = self.reading + (self.contact - self.reading) * min(DT / self.lag, 1.0)
+        return controller_inputs(
+            F_hand_B=hand + self.contact,
+            F_probe_B=self.reading,
+            F_hand_meas_B=hand + self.contact,
+            p_BT_B=self.p,
+            probe_axis_B=AXIS,
+        )
+
+
+def run_sloped(ctl, patient, t0, t1, hand_x_N=0.0):
+    pressing, flags = [], []
+    for k in range(round(t0 / DT), round(t1 / DT)):
+        t = k * DT
+        out = ctl.step(t, DT, patient.inputs(hand_x_N))
+        patient.step(t, out["twist_B"][:3])
+        pressing.append(float(-patient.contact @ AXIS))
+        flags.append(int(out["status"][0]))
+    return np.array(pressing), np.array(flags)
+
+
+def test_a_hold_along_the_surfaces_normal_stops_the_probe_sliding_with_each_breath():
+    # along the axis the probe slides over the skin with every breath (20 mm · sin 12° a breath)
+    # and friction turns over at each breath's turn; along the contact's mean direction it rides
+    # the surface where it is
+    results = {}
+    for motion in ("axis", "normal"):
+        ctl = holding_controller(motion=motion)
+        patient = SlopedPatient()
+        run_sloped(ctl, patient, 0.0, 4.0)
+        assert ctl.hold.phase == HoldPhase.HOLDING, motion
+        patient.slips, patient.frictions = [], []
+        pressing, flags = run_sloped(ctl, patient, 4.0, 40.0)
+        assert np.all(flags & int(Status.HOLDING)), motion
+        late = slice(len(pressing) // 2, None)
+        angle = np.degrees(np.arccos(np.clip(ctl.hold.line @ -NORMAL, -1.0, 1.0)))
+        slip, friction = np.mean(patient.slips[late]), np.mean(patient.frictions[late])
+        results[motion] = (slip, friction, np.std(pressing[late]), angle)
+    slip_axis, friction_axis, std_axis, angle_axis = results["axis"]
+    slip_normal, friction_normal, std_normal, angle_normal = results["normal"]
+    assert angle_axis == pytest.approx(12.0, abs=1e-6)  # the axis, untouched
+    assert angle_normal < 2.0  # the line found the normal
+    assert slip_normal < 0.1 * slip_axis  # the probe no longer slides
+    assert friction_normal < 0.3 * friction_axis  # nor pulls on the skin
+    assert std_normal < 0.5, std_axis  # the hold still rides the breath
+
+
+def test_a_contact_that_swings_across_is_no_touch_and_a_hand_still_is():
+    # the probe sensor's reading 0.1 s behind the wrist's: a contact swinging 5 N across the
+    # axis in 0.2 s reads as up to 2.2 N of F̃ for about 0.2 s, a touch without the widening
+    for swing_s, handed_back in ((0.0, True), (0.1, False)):
+        ctl = holding_controller(swing_s=swing_s)
+        patient = SlopedPatient(amplitude_m=0.0, lag_s=0.1)
+        run_sloped(ctl, patient, 0.0, 4.0)
+        assert ctl.hold.phase == HoldPhase.HOLDING
+        patient.kick_rate, patient.kick_until = np.array([25.0, 0.0, 0.0]), 4.2
+        _, flags = run_sloped(ctl, patient, 4.0, 5.0)
+        back = bool(np.any(flags & int(Status.HANDING_BACK)))
+        assert back == handed_back, swing_s
+    # with the widening, a hand's push across (the contact steady) hands back as before
+    _, flags = run_sloped(ctl, patient, 5.0, 6.0, hand_x_N=3.0)
+    assert np.any(flags & int(Status.HANDING_BACK))
+
+
+def test_hold_params_reject_an_unknown_motion_and_a_bad_angle():
+    with pytest.raises(ConfigError, match="motion: expected one of axis, normal, got 'sideways'"):
+        HoldParams(motion="sideways")
+    with pytest.raises(ConfigError, match="normal_max_deg"):
+        HoldParams(normal_max_deg=120.0)

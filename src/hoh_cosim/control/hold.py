@@ -30,31 +30,43 @@ hand does freehand, and what this block does once the hand is off the handle.
                be above F̃'s own error along the axis with nobody's hand, under a newton only
                after a probe check: off by default (docs/decisions.md, "The hold after the probe
                check")
-    hold       along the probe axis a (handle to tip, from the estimator), z = p_BT·a the tip's
-               depth coordinate, c the axial contact force (pressing positive):
+    hold       along a line l, the probe axis a (handle to tip, from the estimator) unless
+               `motion` says otherwise (below), z = p_BT·l the tip's depth coordinate, c the
+               axial contact force (pressing positive, along a whatever the line):
                    m = z - (c - c_ref) / k̂         where the tip must be for c = c_ref: the surface
                                                     plus the depth of c_ref (tissue stiffness k̂)
                    ŝ, ṡ, s̈  a constant-acceleration Kalman filter on m (steady-state gain,
                             bandwidth `observer_hz`): the breathing surface, smooth
                    u = ṡ_τ + k_z (s_τ - z) + k_i ∫ (c_ref - c) / k̂ dt
                             s_τ, ṡ_τ: the filter's state `lookahead_s` ahead (the robot's delay)
-                   v = u a,   ω = 0
+                   v = u l,   ω = 0
                With k̂ = k the measurement m does not depend on the robot at all (m = surface +
                depth): the robot follows a filtered surface (feed-forward) and its own exactly
                measured position (k_z), so the force sensor's noise reaches the tip only through
                the filter's band (3 Hz: a trade between the breath's tracking and the noise
                passed, docs/decisions.md); a k̂ off by a factor ρ = k / k̂
                leaves a loop of gain 1 - ρ, stable for 0 < ρ < 2. The slow integral takes out
-               what the linearisation leaves (the tissue stiffens with depth). Across the axis and
+               what the linearisation leaves (the tissue stiffens with depth). Across the line and
                in rotation the command is rest: the rest of the pose held
+    line       (`motion`) `axis`, the default: l = a. `normal`: l starts at a and follows the
+               contact's direction, the wrist's force low-passed over `normal_tau_s` while no hand
+               touches (F̃ inside the quiet band, and inside the retake's band along the axis).
+               The breath moves the surface along its normal; where that differs from the axis (12°
+               on the flank of the clinical study's abdomen) a hold along the axis slides the probe
+               over the skin at every breath, and friction, turning over at each breath's turn and
+               felt by the wrist, both moves the contact and drives the loop into a limit cycle at
+               12-16 Hz (docs/decisions.md, "The hold along the surface's normal"). Friction
+               averages out over breaths, and the mean is the normal. The filter's state, the
+               tip's history and the travel guard's origin move with the line
     hand back  a touch of the handle: F̃ departs from its value at the engagement by more than the
-               quiet band (scaled as above), confirmed by the raw packet and either firm (more than
-               `reengage_factor` bands) or lasting `confirm_s`; the admittance's command is then
-               blended in over `blend_s` (v = (1 - β) v_hold + β v_law, β from 0 to 1), the hold
-               running meanwhile, so the command has no step
+               quiet band (scaled as above; across the axis widened, per base axis, by the range
+               of the probe's force over the last `swing_s`, `_swing`), confirmed by the raw packet
+               and either firm (more than `reengage_factor` bands) or lasting `confirm_s`; the
+               admittance's command is then blended in over `blend_s` (v = (1 - β) v_hold +
+               β v_law, β from 0 to 1), the hold running meanwhile, so the command has no step
     guards     the hold ends, and the robot brakes to rest, when the contact is lost (the probe force
-               under `loss_N`) for `loss_s` or while the tip moved `loss_m` along the axis, or when
-               the tip has moved `max_travel_m` along the axis from where the hold began: it never
+               under `loss_N`) for `loss_s` or while the tip moved `loss_m` along the line, or when
+               the tip has moved `max_travel_m` along the line from where the hold began: it never
                chases a patient who moved away. Its own speed is at most `max_speed`; the
                supervisor's limits (speed, acceleration, soft cap, workspace, stops) apply after it,
                as to every command
@@ -104,6 +116,8 @@ __all__ = [
 
 FORCE_SOURCES = ("combined", "wrist", "probe")
 """The sensor whose newest packet the hold regulates (module docstring)."""
+MOTIONS = ("axis", "normal")
+"""The line the hold moves the tip along (module docstring)."""
 _HISTORY_S = 0.1  # [s] the tip positions kept to match a packet's age (the FSE103's is under 0.02)
 
 
@@ -155,6 +169,9 @@ class HoldParams:
         "confirm_s": "s",
         "touch_tau_s": "s",
         "blend_s": "s",
+        "swing_s": "s",
+        "normal_max_deg": "deg",
+        "normal_tau_s": "s",
         "retake_band_N": "N",
         "retake_push_s": "s",
         "loss_N": "N",
@@ -168,6 +185,13 @@ class HoldParams:
     # FORCE_SOURCES: what the hold regulates (module docstring); the clinical study's hold mode
     # sets combined, rehearsed in simulation only so far (docs/decisions.md)
     force_source: str = "wrist"
+    # MOTIONS: the line the tip moves along while held (module docstring); normal: the contact's
+    # direction, the wrist's force low-passed over normal_tau_s (several breaths: friction flips
+    # with each) while no hand touches, kept within normal_max_deg of the axis (friction tilts
+    # the contact force by at most atan μ, 11° for μ = 0.2 on gel)
+    motion: str = "axis"
+    normal_tau_s: float = 5.0
+    normal_max_deg: float = 30.0
     # the hand's share (`HandShare`): an event is the sensors' difference moving past the band
     # within the window; it is followed that long at most, one each way per hold, a rest apart,
     # and undone if it moved the share less than share_min_N (the probe's play at a breath's turn)
@@ -206,6 +230,8 @@ class HoldParams:
     reengage_factor: float = 2.0  # a touch this many bands strong hands back at once
     confirm_s: float = 0.15  # [s] ... a weaker one (above one band) after this long
     touch_tau_s: float = 0.5  # [s] across the axis, F̃'s reference follows it this slowly
+    # [s] the touch's band widened by the probe's force range over this long (`_swing`); 0: off
+    swing_s: float = 0.0
     blend_s: float = 0.2  # [s] the hand-back's blend
     # [N] the retake's band along the probe (module docstring); 0: no retake. The clinical study's
     # hold, after a probe check, sets 1 N: F̃·a with nobody's hand read -0.6 to +0.6 N there
@@ -226,6 +252,13 @@ class HoldParams:
                 f"force_source: expected one of {', '.join(FORCE_SOURCES)}, "
                 f"got {self.force_source!r}"
             )
+        if self.motion not in MOTIONS:
+            raise ConfigError(f"motion: expected one of {', '.join(MOTIONS)}, got {self.motion!r}")
+        object.__setattr__(
+            self,
+            "normal_max_deg",
+            as_scalar(self.normal_max_deg, "normal_max_deg", low=0.0, high=90.0),
+        )
         for name in (
             "ki",
             "lookahead_s",
@@ -238,6 +271,7 @@ class HoldParams:
             "settle_s",
             "confirm_s",
             "blend_s",
+            "swing_s",
             "retake_band_N",
             "loss_s",
         ):
@@ -248,6 +282,7 @@ class HoldParams:
             "observer_hz",
             "position_gain",
             "window_s",
+            "normal_tau_s",
             "touch_tau_s",
             "share_window_s",
             "share_filter_s",
@@ -409,6 +444,8 @@ class ContactHold:
         self._surface = [0.0, 0.0, 0.0]  # ŝ, ṡ, s̈ along the axis
         self._integral = 0.0  # [m] ∫ (c_ref - c) / k̂ dt
         self._axis = np.zeros(3)
+        self._line = np.zeros(3)  # the line the tip moves along (`motion`)
+        self._normal = np.zeros(3)  # the contact's pressing force, low-passed (`motion` normal)
         self._F0 = np.zeros(3)  # F̃ at the engagement
         self._low = [0.0, 0.0]
         self._ref = [np.zeros(3), np.zeros(3)]
@@ -420,6 +457,8 @@ class ContactHold:
         self._band_key: tuple[int, int] | None = None
         self._band_value = np.zeros(3)
         self._history: deque[tuple[float, float]] = deque()  # (t, z) of the last ticks
+        self._turned = 0.0  # [m] what the line's turns moved z by since the engagement
+        self._recent: deque[tuple[float, float, float, float]] = deque()  # (t, F_probe_B)
         self._pushes: deque[tuple[float, float]] = deque()  # (t, probe's axial force), held
         self._push = (0.0, 0.0)  # (start, end) of the hand's last push beyond the retake band
         self._pushing_since: float | None = None
@@ -429,6 +468,11 @@ class ContactHold:
     @property
     def active(self) -> bool:
         return self.phase != HoldPhase.OFF
+
+    @property
+    def line(self) -> Vec3:
+        """The unit vector the tip moves along while held (`motion`), in the base frame."""
+        return self._line.copy()
 
     def _band(self, deadband: Vec3) -> Vec3:
         """b = max(η, raw_band_N), kept while η and the parameters stay the same objects."""
@@ -483,18 +527,20 @@ class ContactHold:
     def _delayed(self, t: float, z: float, age: float) -> float:
         """The tip along the axis when the regulated packet was sampled (`age` after its arrival,
         `latency_s` before it), from the positions of the last ticks: the force and the position
-        the surface estimate combines must be of the same instant (module docstring)."""
+        the surface estimate combines must be of the same instant (module docstring). The history
+        holds z less the line's turns so far (`_turned`), which the answer adds back."""
         history = self._history
-        history.append((t, z))
+        turned = self._turned
+        history.append((t, z - turned))
         while len(history) > 2 and t - history[1][0] >= _HISTORY_S:
             history.popleft()
         when = t - age - self.params.latency_s
         t1, z1 = history[-1]
         for t0, z0 in reversed(history):
             if t0 <= when:
-                return z0 if t1 <= t0 else z0 + (z1 - z0) * (when - t0) / (t1 - t0)
+                return turned + (z0 if t1 <= t0 else z0 + (z1 - z0) * (when - t0) / (t1 - t0))
             t1, z1 = t0, z0
-        return history[0][1]
+        return turned + history[0][1]
 
     def watch(
         self,
@@ -567,9 +613,13 @@ class ContactHold:
         self.setpoint_N = c
         self.force_N = c
         self._window = None
+        self._line = axis_B.copy()
+        self._normal = c * axis_B
         z = float(p_BT_B.dot(axis_B))
         self._surface = [z, float(v_prev.dot(axis_B)), 0.0]
         self._history = deque([(t, z)])
+        self._turned = 0.0
+        self._recent = deque()
         self._integral = 0.0
         self._F0 = F.copy()
         self._low = [float(F.dot(axis_B))] * 2  # the lowest F̃·a since, filtered and raw
@@ -654,6 +704,54 @@ class ContactHold:
                 self.target_N = min(max(level, p.contact_N), p.max_force_N)
             self._push = (t, t)
 
+    def _follow_normal(
+        self, dt: float, touch: float, F: Vec3, F_meas_B: Vec3, p_BT_B: Vec3
+    ) -> None:
+        """`motion` normal: the line follows the contact's direction, the wrist's force (the
+        contact alone with nobody's hand) low-passed over `normal_tau_s`, starting from the axis,
+        while no hand touches: `touch` (`_touch`) at most one band, and F̃ along the axis inside
+        the retake's band where there is one (a hand pushing on along the probe). Moving along
+        the axis where the surface's normal differs slides the probe over the skin at every
+        breath, and friction flips along the axis at each breath's turn; over several breaths it
+        cancels, and the mean is the normal (docs/decisions.md, "The hold along the surface's
+        normal"). The surface filter's state, the tip's history and the travel guard's origin
+        move to the new line with it."""
+        p = self.params
+        if touch > 1.0 or (0.0 < p.retake_band_N < abs(float(F.dot(self._axis)))):
+            return
+        w = min(dt / p.normal_tau_s, 1.0)
+        self._normal = normal = self._normal - w * (F_meas_B + self._normal)
+        size = float(np.linalg.norm(normal))
+        if size < p.contact_N:
+            return
+        line = normal / size
+        if float(line.dot(self._axis)) < math.cos(math.radians(p.normal_max_deg)):
+            return
+        # the same tip, measured along the new line: shift what is kept along the old one
+        old = self._line
+        shift = float(p_BT_B.dot(line)) - float(p_BT_B.dot(old))
+        s, s_dot, s_ddot = self._surface
+        self._surface = [s + shift, s_dot, s_ddot]
+        self._turned += shift
+        self._p0 += shift
+        self._line = line
+
+    def _swing(self, t: float, F_probe_B: Vec3) -> Vec3:
+        """The range of the probe's force, per base axis, over the last `swing_s`. Under the hold
+        a hand on the handle pushes the robot, not the contact, so the probe sensor's reading
+        moves only with the contact. F̃ is the wrist's force less the probe's, whose estimate
+        lags the wrist's by about 60 ms: a contact that swings fast (friction turning over as a
+        hand lets go) reads as F̃ of about that swing for as long (2.3 N across for 0.15 s on a
+        view, docs/decisions.md, "The hand's opening read as a touch"), which a touch must
+        exceed."""
+        recent = self._recent
+        recent.append((t, *F_probe_B.tolist()))
+        while t - recent[0][0] > self.params.swing_s + 1e-9:
+            recent.popleft()
+        return np.array(
+            [max(row[i] for row in recent) - min(row[i] for row in recent) for i in (1, 2, 3)]
+        )
+
     def _end(self, why: HoldEnd) -> None:
         self.phase = HoldPhase.OFF
         self.ended = why
@@ -708,7 +806,8 @@ class ContactHold:
         contact, uncompensated)."""
         p = self.params
         a = self._axis
-        z = float(p_BT_B.dot(a))
+        line = self._line
+        z = float(p_BT_B.dot(line))
         # guards: the contact lost, or the tip too far from where the hold began
         if float(F_probe_B.dot(F_probe_B)) < p.loss_N * p.loss_N:
             if self._lost_since is None:
@@ -728,7 +827,7 @@ class ContactHold:
             self._retake(t, float(F.dot(a)), -float(F_probe_B.dot(a)))
         age = (probe_age if probe else ft_age) + p.latency_s
         z_d = self._delayed(t, z, age - p.latency_s)
-        v_hold = self._law(dt, c, z, z_d, age) * a
+        v_hold = self._law(dt, c, z, z_d, age) * line
 
         if self.phase == HoldPhase.BLENDING:
             assert self._t_back is not None
@@ -740,8 +839,11 @@ class ContactHold:
             # v = (1 - β) v_hold + β v_law
             return (1.0 - beta) * v_hold + beta * v_law
 
-        # a touch of the handle (`_touch`), confirmed by the raw packet
+        # a touch of the handle (`_touch`), confirmed by the raw packet; the band across the axis
+        # widened by the probe's own swing over the last `swing_s` (`_swing`)
         band = self._band(deadband)
+        if p.swing_s > 0.0:
+            band = band + self._swing(t, F_probe_B)
         n = self._touch(dt, F, a, band, 0)
         raw = F_raw is None or self._touch(dt, F_raw, a, band, 1) > 1.0
         if n > 1.0 and raw:
@@ -756,4 +858,6 @@ class ContactHold:
                 return v_hold  # β = 0 on the touch's tick
         else:
             self._touch_since = None
+        if p.motion == "normal" and F_meas_B is not None:
+            self._follow_normal(dt, n, F, F_meas_B, p_BT_B)
         return v_hold
