@@ -248,6 +248,10 @@ HOLD_ON_RELEASE = (
     # the probe checked, F̃ along the probe is right within a newton: a hand that went on pushing
     # or pulling while the robot held leaves its level when it is still (`retake_band_N`)
     "controller.hold.retake_band_N=1.0",
+    # the probe rides the breath along the surface's normal, not sliding over the skin (`motion`),
+    # and the contact's own swing is no touch (`swing_s`)
+    "controller.hold.motion=normal",
+    "controller.hold.swing_s=0.1",
 )
 """Hold-on-release (`hoh_cosim.control.hold`) on today's defaults after a probe check, with the
 release detection that tells it the hand let go, regulating the wrist sensor's force
@@ -255,7 +259,13 @@ release detection that tells it the hand let go, regulating the wrist sensor's f
 the handle from none by F̃ along the probe, which the FSE103's gain error otherwise fills: without
 it the hold engaged under a hand still pushing 1.4-5.2 N, and the contact fell by that push at
 every let-go (docs/decisions.md, "The force the hold keeps"). With it, the hold also takes the
-level a hand left by pushing on while held (the retake, 1 N band). The combined force, better on
+level a hand left by pushing on while held (the retake, 1 N band). It moves the probe along the
+contact's mean direction, the surface's normal, rather than the probe's axis: on the abdomen's
+flank the two differ by 12°, and the probe slid over the skin with every breath, friction turning
+over along the axis at each breath's turn and driving the hold into a 12-16 Hz limit cycle
+(docs/decisions.md, "The hold along the surface's normal"). The touch's band across the axis is
+widened by the probe's own swing over the last 0.1 s, which the probe's filter lags: a hand
+opening turned friction over and read as a touch. The combined force, better on
 three operators' quick runs, was worse over the full study's twenty on every count but the press's
 jitter: docs/decisions.md, "Hold-on-release"."""
 
