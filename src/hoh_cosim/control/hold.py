@@ -441,7 +441,7 @@ class ContactHold:
         self._window_sum = 0.0
         self._quiet_since: float | None = None
         self._contact_since: float | None = None
-        self._surface = [0.0, 0.0, 0.0]  # ŝ, ṡ, s̈ along the axis
+        self._surface = [0.0, 0.0, 0.0]  # ŝ, ṡ, s̈ along the line
         self._integral = 0.0  # [m] ∫ (c_ref - c) / k̂ dt
         self._axis = np.zeros(3)
         self._line = np.zeros(3)  # the line the tip moves along (`motion`)
@@ -449,11 +449,11 @@ class ContactHold:
         self._F0 = np.zeros(3)  # F̃ at the engagement
         self._low = [0.0, 0.0]
         self._ref = [np.zeros(3), np.zeros(3)]
-        self._p0 = 0.0  # the tip along the axis at the engagement
+        self._p0 = 0.0  # the tip along the line at the engagement
         self._touch_since: float | None = None
         self._t_back: float | None = None
         self._lost_since: float | None = None
-        self._lost_at = 0.0  # the tip along the axis when the contact was lost
+        self._lost_at = 0.0  # the tip along the line when the contact was lost
         self._band_key: tuple[int, int] | None = None
         self._band_value = np.zeros(3)
         self._history: deque[tuple[float, float]] = deque()  # (t, z) of the last ticks
@@ -525,7 +525,7 @@ class ContactHold:
         return c_w + self._hand.share, False
 
     def _delayed(self, t: float, z: float, age: float) -> float:
-        """The tip along the axis when the regulated packet was sampled (`age` after its arrival,
+        """The tip along the line when the regulated packet was sampled (`age` after its arrival,
         `latency_s` before it), from the positions of the last ticks: the force and the position
         the surface estimate combines must be of the same instant (module docstring). The history
         holds z less the line's turns so far (`_turned`), which the answer adds back."""
