@@ -57,7 +57,7 @@ hand does freehand, and what this block does once the hand is off the handle.
                felt by the wrist, both moves the contact and drives the loop into a limit cycle at
                12-16 Hz (docs/decisions.md, "The hold along the surface's normal"). Friction
                averages out over breaths, and the mean is the normal. The filter's state, the
-               tip's history and the travel guard's origin move with the line
+               tip's history and the guards' origins move with the line
     hand back  a touch of the handle: F̃ departs from its value at the engagement by more than the
                quiet band (scaled as above; across the axis widened, per base axis, by the range
                of the probe's force over the last `swing_s`, `_swing`), confirmed by the raw packet
@@ -714,8 +714,8 @@ class ContactHold:
         the axis where the surface's normal differs slides the probe over the skin at every
         breath, and friction flips along the axis at each breath's turn; over several breaths it
         cancels, and the mean is the normal (docs/decisions.md, "The hold along the surface's
-        normal"). The surface filter's state, the tip's history and the travel guard's origin
-        move to the new line with it."""
+        normal"). The surface filter's state, the tip's history and the guards' origins (the
+        travel's, and the lost contact's) move to the new line with it."""
         p = self.params
         if touch > 1.0 or (0.0 < p.retake_band_N < abs(float(F.dot(self._axis)))):
             return
@@ -734,6 +734,7 @@ class ContactHold:
         self._surface = [s + shift, s_dot, s_ddot]
         self._turned += shift
         self._p0 += shift
+        self._lost_at += shift
         self._line = line
 
     def _swing(self, t: float, F_probe_B: Vec3) -> Vec3:
