@@ -561,24 +561,30 @@ def test_hold_on_release_on_a_breathing_phantom_takes_over_and_gives_back(tmp_pa
     from hoh_cosim.control.supervisor import Status
     from hoh_cosim.rehearsal.rehearse import Rehearsal, rehearse
 
-    said: list[str] = []
-    log_path = tmp_path / "hold.mcap"
-    result = rehearse(
-        Rehearsal(
-            seconds=17.0,  # the hand-back near 12 s of the world: a busy machine puts it late
-            log_path=log_path,
-            task="view",
-            rebias_samples=100,
-            phantom_below_m=0.03,
-            breathing_m=0.010,
-            let_go_s=7.0,
-            retake_s=10.0,
-            controller=ControllerParams(
-                release=ReleaseParams(enabled=True), hold=HoldParams(enabled=True)
+    # A session the machine starved past the robot's watchdog was stopped, as it must be, and says
+    # so; it is run again once (seen once in a loaded clean-clone run: no command for 51 ms, 16 s
+    # in). A second starved run fails.
+    for attempt in range(2):
+        said: list[str] = []
+        log_path = tmp_path / f"hold-{attempt}.mcap"
+        result = rehearse(
+            Rehearsal(
+                seconds=17.0,  # the hand-back near 12 s of the world: a busy machine puts it late
+                log_path=log_path,
+                task="view",
+                rebias_samples=100,
+                phantom_below_m=0.03,
+                breathing_m=0.010,
+                let_go_s=7.0,
+                retake_s=10.0,
+                controller=ControllerParams(
+                    release=ReleaseParams(enabled=True), hold=HoldParams(enabled=True)
+                ),
             ),
-        ),
-        announce=said.append,
-    )
+            announce=said.append,
+        )
+        if not result.session.cause.startswith("the control loop was starved"):
+            break
     assert result.session.clean, result.session.cause
     takes = [s for s in said if s.startswith("ROBOT HOLDS")]
     gives = [s for s in said if s.startswith("HAND HAS THE PROBE")]
