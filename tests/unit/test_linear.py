@@ -156,6 +156,24 @@ def test_loop_model_reads_the_scenario() -> None:
     assert model.robot_delay_s == pytest.approx(0.016)
 
 
+def test_an_intrinsic_hands_stiffness_is_not_delayed() -> None:
+    """The clinical study's hand is `intrinsic`: its stiffness and damping act on the tip as it is,
+    only its press loop waits for its reaction. The loop model then has no hand delay, and the
+    same hand with the delay (`intrinsic` false) loses stability at a slope several times smaller."""
+    path = SCENARIOS / "clinical_assisted.yaml"
+    intrinsic = load_scenario(path)
+    delayed = load_scenario(path, ["operator.intrinsic=false"])
+    assert intrinsic.component_of_kind("operator").params.intrinsic
+    reaction = delayed.component_of_kind("operator").params.reaction_delay_s
+    assert reaction > 0.05
+    assert loop_model(intrinsic).hand_delay_s == 0.0
+    assert loop_model(delayed).hand_delay_s == reaction
+    gain = filter_response(intrinsic.component_of_kind("estimator").params, OMEGA)
+    fast = loop_margins(loop_model(intrinsic), gain, OMEGA).critical_slope
+    slow = loop_margins(loop_model(delayed), gain, OMEGA).critical_slope
+    assert fast > 3.0 * slow
+
+
 @pytest.mark.parametrize("kind", sorted(FILTERS))
 @pytest.mark.parametrize("slope", [0.002, 0.0125, 0.2])
 def test_frd_margins_are_python_controls_to_the_bit(kind: str, slope: float) -> None:

@@ -22,7 +22,8 @@ The loop, along one base axis, with the robot a velocity source (speedL) and the
 linear region (eq. 10 beyond the deadband; the deadband only lowers the gain, so the linear loop is the
 worst case):
 
-    hand:   F = K_h (p_ref - p(t - τ_h)) + D_h (v_ref - v(t - τ_h))      (the operator model)
+    hand:   F = K_h (p_ref - p(t - τ_h)) + D_h (v_ref - v(t - τ_h))      (the operator model;
+            τ_h = 0 for an `intrinsic` hand, whose stiffness is the muscles' own)
     sensor: F̂ = G_filter · e^{-s τ_s} F,  τ_s = latency + (N - 1) dt / 2 (the held packet's mean age)
     robot:  v = α F̂ delayed by τ_r = latency_cycles / rate + 1 / (2 rate) + controller period / 2
     open loop:  L(s) = α (K_h + D_h s) / s · G_filter(s) · e^{-s (τ_h + τ_s + τ_r)}
@@ -228,7 +229,8 @@ def loop_model(scenario, axis: int = 0) -> LoopModel:
         slope=float(ctrl.params.translation.slope[axis]),
         hand_stiffness=float(op.params.stiffness),
         hand_damping=float(op.params.damping),
-        hand_delay_s=float(op.params.reaction_delay_s),
+        # an intrinsic hand's stiffness and damping act on the tip as it is (plant_models.operator)
+        hand_delay_s=0.0 if op.params.intrinsic else float(op.params.reaction_delay_s),
         sensor_delay_s=float(ft.params.latency_s) + (ticks - 1) * dt / 2.0,
         robot_delay_s=arm.latency_cycles / arm.rate_hz + 0.5 / arm.rate_hz + 0.5 * ctrl.every * dt,
     )
