@@ -21,6 +21,7 @@ from hoh_cosim.study.clinical import (
     TASKS,
     _shared_modes,
     study_variants,
+    with_overrides,
 )
 from hoh_cosim.study.sweep import set_option
 
@@ -29,6 +30,7 @@ pytestmark = pytest.mark.xdist_group(__name__)
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 OPERATORS = 2
+SET = "controller.hold.swing_s=0.1"
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +50,10 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
             "--out",
             str(out),
             "--quiet",
+            # through every assisted mode, a --set that changes no run: the hold mode's own value,
+            # and the other modes' hold is off
+            "--set",
+            SET,
         ]
     )
     return status, out
@@ -73,6 +79,8 @@ def test_it_writes_the_page_the_table_and_the_summary(study) -> None:
     for image in re.findall(r"<img src='([^']+)'", page):
         assert (out / image).is_file(), image
     report = (out / "report.md").read_text()
+    assert f"every assisted mode with --set {SET}" in report.splitlines()[2]
+    assert json.loads((out / "summary.json").read_text())["overrides"] == [SET]
     assert "Fang 2017 beside ours" in report
     assert "32 to 73" in report
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no staging left
@@ -254,6 +262,30 @@ def test_an_operator_is_the_same_person_and_patient_in_every_run() -> None:
     assert by_operator[0] != by_operator[1]
 
 
+def test_a_set_reaches_every_assisted_mode_and_leaves_freehand_alone() -> None:
+    """`--set` comes after each assisted mode's own overrides, so it wins over the mode (the seed
+    mode's pinned slope too); each operator's draw and the task's settings still come after it."""
+    from hoh_cosim.cosim.scenario import load_scenario
+
+    texts = ("controller.translation.slope=[0.04,0.04,0.04]", "operator.force_kp=0.05")
+    modes = with_overrides(texts)
+    assert modes[FREEHAND] == MODES[FREEHAND]
+    keyed = study_variants(SCENARIOS, 2, seed=5, quick=True, modes=modes)
+    assert len(keyed) == len(study_variants(SCENARIOS, 2, seed=5, quick=True))
+    for (_, _task, mode), variant in keyed:
+        if not MODES[mode].assisted:
+            assert not set(texts) & set(variant.overrides)
+            continue
+        own = len(MODES[mode].overrides)
+        assert variant.overrides[own : own + 2] == texts
+        scenario = load_scenario(variant.scenario, variant.overrides, variant.duration_s)
+        slope = scenario.component_of_kind("controller").params.translation.slope
+        assert list(slope) == [0.04, 0.04, 0.04]
+        assert scenario.component_of_kind("operator").params.force_kp == 0.05
+    # the seed's law and today's defaults, both under the same --set, are still one law
+    assert _shared_modes(SCENARIOS, modes) == {"defaults": "seed"}
+
+
 @pytest.mark.parametrize(
     ("options", "message"),
     [
@@ -262,6 +294,11 @@ def test_an_operator_is_the_same_person_and_patient_in_every_run() -> None:
         (["--scheduler", "tcp://127.0.0.1:1"], r"--scheduler tcp://127.0.0.1:1: cannot reach"),
         (["--seed", "-1"], r"--seed: expected an integer >= 0, got -1"),
         (["--workers", "-2"], r"--workers: expected an integer >= 0, got -2"),
+        (
+            ["--set", "controller.translation.slop=1"],
+            r"--set controller\.translation\.slop: unknown parameter of AdmittanceGains",
+        ),
+        (["--set", "controller"], r"--set controller: expected component\.parameter=value"),
     ],
 )
 def test_a_mistake_is_one_line_and_nothing_is_written(

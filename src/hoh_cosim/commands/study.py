@@ -5,7 +5,7 @@
     hoh-cosim tune [--out DIR] [-n N] [--seed S] [--seeds 1,2,3] [--workers N] [--scheduler ADDRESS]
     hoh-cosim probe-correction [--out DIR] [--seed S] [--engine E] [--workers N] [--quick]
     hoh-cosim study clinical [--quick] [--operators N] [--seed S] [--workers W] [--scheduler ADDR]
-                             [--out DIR]
+                             [--out DIR] [--set C.P=V ...]
 
 `--workers 0` runs everything serially in this process (no Dask).
 """
@@ -190,6 +190,17 @@ def add_commands(sub) -> None:
         metavar="DIR",
         default="scenarios",
         help="where clinical_freehand.yaml and clinical_assisted.yaml are (default: ./scenarios)",
+    )
+    clinical.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="C.P=V",
+        help=(
+            "set a parameter in every assisted mode's runs, after the mode's own, e.g. "
+            "controller.translation.slope=[0.04,0.04,0.04] (repeatable; freehand as it is)"
+        ),
     )
     _cluster_options(clinical)
 
@@ -395,6 +406,7 @@ def _clinical(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         scenarios=args.scenarios,
         progress=not args.quiet,
+        overrides=args.overrides,
     )
     s = result.summary
     print(

@@ -6,7 +6,8 @@ a breathing patient: the user study the seed could not run (000, 1.A, 5.D).
       for each task       view   reach a view 5 cm away and hold it 60 s at 10 N (15 s with --quick)
                           scan   a 10 cm line across the breathing abdomen at 8 N, 1 cm/s
                           press  press to 15 N and hold
-        for each mode     MODES: freehand, and each assisted law (one entry each)
+        for each mode     MODES: freehand, and each assisted law (one entry each); `--set`
+                          overrides after each assisted mode's own (`with_overrides`)
           one run         scenarios/clinical_freehand.yaml or clinical_assisted.yaml with --set
                           overrides, the clinical metric set (hoh_cosim.cosim.clinical)
 
@@ -23,7 +24,8 @@ operator's and patient's draw) and `summary.json`:
 
     {"tasks": {task: {mode: {"hand_force_reduction_pct": {"mean", "min", "max", "ci95", "n",
                                                           "per_operator"},
-                             "jitter_improvement_pct": {...}, ...}}}, "fang_2017": ..., ...}
+                             "jitter_improvement_pct": {...}, ...}}}, "fang_2017": ...,
+     "overrides": [the --set texts], ...}
 
 The directory is replaced whole and only when everything is written; a mistake in the options is
 one line and nothing written.
@@ -67,6 +69,7 @@ __all__ = [
     "paired_change",
     "run_clinical",
     "study_variants",
+    "with_overrides",
 ]
 
 FULL_OPERATORS = 20
@@ -330,6 +333,21 @@ MODES: dict[str, Mode] = {
 HOLD = "hold"
 """The mode whose hand lets go: the hold-on-release figures (`summary.json`'s `hold_on_release`)."""
 ASSISTED = tuple(name for name, mode in MODES.items() if mode.assisted)
+
+
+def with_overrides(overrides: Sequence[str]) -> dict[str, Mode]:
+    """`MODES` with `overrides` (the study's `--set`) after each assisted mode's own, so that they
+    win over the mode: a law, a gain or the hand's press loop tried on every assisted mode at once.
+    Each operator's draw and each task's settings still come after them (`study_variants`): the
+    population and the tasks stay the study's. Freehand stays as it is: the comparison is against
+    the same hands holding the probe themselves."""
+    extra = tuple(overrides)
+    return {
+        name: replace(mode, overrides=(*mode.overrides, *extra)) if mode.assisted else mode
+        for name, mode in MODES.items()
+    }
+
+
 _KEEP_EVERY = 10  # the kept traces at 100 Hz
 
 
@@ -369,17 +387,21 @@ def _start_s(scenarios: Path, mode: Mode) -> float:
 
 
 def study_variants(
-    scenarios: Path, operators: int, seed: int, quick: bool
+    scenarios: Path,
+    operators: int,
+    seed: int,
+    quick: bool,
+    modes: Mapping[str, Mode] = MODES,
 ) -> list[tuple[tuple[int, str, str], Variant]]:
     """((operator, task, mode), run) for every run of the study, each checked against its scenario
     first (so a mistake is one line before anything runs)."""
     from hoh_cosim.cosim.scenario import load_scenario
 
-    starts = {name: _start_s(scenarios, mode) for name, mode in MODES.items()}
+    starts = {name: _start_s(scenarios, mode) for name, mode in modes.items()}
     out: list[tuple[tuple[int, str, str], Variant]] = []
     for i in range(operators):
         for task in TASKS.values():
-            for name, mode in MODES.items():
+            for name, mode in modes.items():
                 overrides = (
                     *mode.overrides,
                     *_operator_overrides(mode, i, seed),
@@ -559,8 +581,10 @@ def run_clinical(
     scheduler: str | None = None,
     scenarios: str | Path = "scenarios",
     progress: bool = True,
+    overrides: Sequence[str] = (),
 ) -> ClinicalResult:
-    """Run the study and write it to `out` (replaced whole)."""
+    """Run the study and write it to `out` (replaced whole); `overrides` (`--set`) on every
+    assisted mode (`with_overrides`)."""
     from hoh_cosim.cosim.run import jsonable
     from hoh_cosim.results import check_out_dir, replace_dir
     from hoh_cosim.study.sweep import write_table
@@ -572,8 +596,9 @@ def run_clinical(
     check_out_dir(out, marker="summary.json", what="clinical study")
     _needed(scenarios)
     started = time.perf_counter()
-    keyed = study_variants(scenarios, n, seed, quick)
-    shared = _shared_modes(scenarios)
+    modes = with_overrides(overrides)
+    keyed = study_variants(scenarios, n, seed, quick, modes)
+    shared = _shared_modes(scenarios, modes)
     todo = [(key, v) for key, v in keyed if key[2] not in shared]
     ran = run_variants(
         [v for _, v in todo],
@@ -591,9 +616,10 @@ def run_clinical(
         (a, b)
         for i, a in enumerate(ASSISTED)
         for b in ASSISTED[i + 1 :]
-        if _same_law(scenarios, MODES[a], MODES[b])
+        if _same_law(scenarios, modes[a], modes[b])
     ]
     summary = _summary(got, n, seed, quick, equal_laws, time.perf_counter() - started)
+    summary["overrides"] = list(overrides)
     figures = _figures(got, n, summary)
     sections = _sections(summary, got, n, equal_laws, figures)
     columns, rows = table_rows(outcomes)
@@ -1182,6 +1208,10 @@ def _header(summary: Mapping[str, Any]) -> tuple[str, str]:
         f"{summary['operators']} operators x {len(TASKS)} tasks x {len(MODES)} modes = "
         f"{summary['runs']} runs ({kind}, seed {summary['seed']}), {summary['wall_s']:.0f} s"
     )
+    if summary.get("overrides"):
+        line += "; every assisted mode with " + " ".join(
+            f"--set {text}" for text in summary["overrides"]
+        )
     if summary["failed_runs"]:
         line += f"; {len(summary['failed_runs'])} failed"
     return "hoh-cosim clinical study: freehand against assisted scanning", line
