@@ -3,7 +3,9 @@ mistakes it refuses before anything runs."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
 import re
 from dataclasses import replace
@@ -36,26 +38,29 @@ SET = "controller.hold.swing_s=0.1"
 @pytest.fixture(scope="module")
 def study(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
     out = tmp_path_factory.mktemp("clinical") / "study"
-    status = main(
-        [
-            "study",
-            "clinical",
-            "--quick",
-            "--operators",
-            str(OPERATORS),
-            "--workers",
-            "2",
-            "--scenarios",
-            str(SCENARIOS),
-            "--out",
-            str(out),
-            "--quiet",
-            # through every assisted mode, a --set that changes no run: the hold mode's own value,
-            # and the other modes' hold is off
-            "--set",
-            SET,
-        ]
-    )
+    said = io.StringIO()
+    with contextlib.redirect_stdout(said):
+        status = main(
+            [
+                "study",
+                "clinical",
+                "--quick",
+                "--operators",
+                str(OPERATORS),
+                "--workers",
+                "2",
+                "--scenarios",
+                str(SCENARIOS),
+                "--out",
+                str(out),
+                "--quiet",
+                # through every assisted mode, a --set that changes no run: the hold mode's own value,
+                # and the other modes' hold is off
+                "--set",
+                SET,
+            ]
+        )
+    (out.parent / "said.txt").write_text(said.getvalue())  # what the command printed
     return status, out
 
 
@@ -80,6 +85,8 @@ def test_it_writes_the_page_the_table_and_the_summary(study) -> None:
         assert (out / image).is_file(), image
     report = (out / "report.md").read_text()
     assert f"every assisted mode with --set {SET}" in report.splitlines()[2]
+    said = (out.parent / "said.txt").read_text().splitlines()
+    assert said[1] == f"  every assisted mode with --set {SET}", said[:3]
     assert json.loads((out / "summary.json").read_text())["overrides"] == [SET]
     assert "Fang 2017 beside ours" in report
     assert "32 to 73" in report

@@ -413,6 +413,8 @@ def _clinical(args: argparse.Namespace) -> int:
         f"clinical: {s['operators']} operators, {s['runs']} runs in {s['wall_s']:.0f} s, "
         f"{len(s['failed_runs'])} failed"
     )
+    if s["overrides"]:
+        print("  every assisted mode with " + " ".join(f"--set {t}" for t in s["overrides"]))
     width = max(len(MODES[mode].label) for mode in ASSISTED)
     print(f"  {'task':6} {'mode':{width}}  {'hand force less [%]':>26}  {'jitter less [%]':>26}")
     for task in TASKS:
