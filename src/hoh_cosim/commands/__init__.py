@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILED", "EXIT_OK", "ArgumentParser"]
+__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILED", "EXIT_OK", "ArgumentParser", "add_set_option"]
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -24,3 +24,11 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: {message} (see --help)\n")
+
+
+def add_set_option(parser: argparse.ArgumentParser, help: str, metavar: str = "C.P=V") -> None:
+    """`--set` (repeatable) into `args.overrides`: parameter overrides as `component.parameter=value`
+    texts, which `hoh_cosim.cosim.scenario.load_scenario` (or the runner's config) checks."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar=metavar, help=help
+    )

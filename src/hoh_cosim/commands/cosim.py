@@ -17,7 +17,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from hoh_cosim.commands import ArgumentParser
+from hoh_cosim.commands import ArgumentParser, add_set_option
 from hoh_cosim.cosim import COUPLINGS, ENGINE_COUPLING, ENGINES, EXTERNAL_ENGINES
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.results import FORMATS
@@ -51,16 +51,10 @@ def add_scenario_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--seed", type=int, metavar="N", help="the random seed (default: the scenario's seed)"
     )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="C.P=V",
-        help=(
-            "set a component's parameter, e.g. controller.contact_compensation=false or "
-            "estimator.filter=butterworth (repeatable; default: the scenario's values)"
-        ),
+    add_set_option(
+        parser,
+        "set a component's parameter, e.g. controller.contact_compensation=false or "
+        "estimator.filter=butterworth (repeatable; default: the scenario's values)",
     )
 
 

@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hoh_cosim.commands import add_set_option
 from hoh_cosim.errors import ConfigError, RunError, io_failure
 from hoh_cosim.rehearsal.faults import CAMPAIGN_KINDS, FAULTS, Fault
 from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
@@ -105,14 +106,11 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_block_overrides(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="B.P=V",
-        help="estimator.x=v or controller.x=v (repeatable; default: the config's or the log's "
+    add_set_option(
+        parser,
+        "estimator.x=v or controller.x=v (repeatable; default: the config's or the log's "
         "parameters)",
+        metavar="B.P=V",
     )
 
 

@@ -18,13 +18,13 @@ import sys
 import time
 from pathlib import Path
 
+from hoh_cosim.commands import EXIT_FAILED, EXIT_OK, add_set_option
 from hoh_cosim.errors import ConfigError
 
 __all__ = ["COMMANDS", "add_commands", "run_command"]
 
 COMMANDS = ("sweep", "report", "tune", "probe-correction", "study")
 STUDIES = ("clinical",)
-EXIT_OK, EXIT_FAILED = 0, 1
 
 
 def _cluster_options(parser: argparse.ArgumentParser) -> None:
@@ -191,16 +191,10 @@ def add_commands(sub) -> None:
         default="scenarios",
         help="where clinical_freehand.yaml and clinical_assisted.yaml are (default: ./scenarios)",
     )
-    clinical.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="C.P=V",
-        help=(
-            "set a parameter in every assisted mode's runs, after the mode's own, e.g. "
-            "controller.translation.slope=[0.04,0.04,0.04] (repeatable; freehand as it is)"
-        ),
+    add_set_option(
+        clinical,
+        "set a parameter in every assisted mode's runs, after the mode's own, e.g. "
+        "controller.translation.slope=[0.04,0.04,0.04] (repeatable; freehand as it is)",
     )
     _cluster_options(clinical)
 
