@@ -306,6 +306,11 @@ def test_a_set_reaches_every_assisted_mode_and_leaves_freehand_alone() -> None:
             r"--set controller\.translation\.slop: unknown parameter of AdmittanceGains",
         ),
         (["--set", "controller"], r"--set controller: expected component\.parameter=value"),
+        (
+            ["--set", "operator.stiffness=300"],
+            r"--set operator\.stiffness: the study sets it in every run \(each operator's draw",
+        ),
+        (["--set", "breathing.start_s=1"], r"--set breathing\.start_s: the study sets it"),
     ],
 )
 def test_a_mistake_is_one_line_and_nothing_is_written(

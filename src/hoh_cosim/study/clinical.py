@@ -598,6 +598,7 @@ def run_clinical(
     started = time.perf_counter()
     modes = with_overrides(overrides)
     keyed = study_variants(scenarios, n, seed, quick, modes)
+    _check_overrides(overrides, keyed, modes)
     shared = _shared_modes(scenarios, modes)
     todo = [(key, v) for key, v in keyed if key[2] not in shared]
     ran = run_variants(
@@ -640,6 +641,28 @@ def run_clinical(
 
     replace_dir(out, fill)
     return ClinicalResult(out, summary, outcomes, sections)
+
+
+def _check_overrides(
+    overrides: Sequence[str],
+    keyed: Sequence[tuple[tuple[int, str, str], Variant]],
+    modes: Mapping[str, Mode],
+) -> None:
+    """Refuse a `--set` of a parameter that the study itself sets after the mode's overrides (each
+    operator's draw, the task's settings, the let-go, the breath's start): it would be overridden
+    in every run without a word."""
+    own: set[str] = set()
+    for (_, _, name), variant in keyed:
+        own.update(
+            text.split("=", 1)[0] for text in variant.overrides[len(modes[name].overrides) :]
+        )
+    for text in overrides:
+        key = text.split("=", 1)[0].strip()
+        if key in own:
+            raise ConfigError(
+                f"--set {key}: the study sets it in every run (each operator's draw, the task or "
+                "the breath); expected a parameter of the law, the sensors or the hand's press loop"
+            )
 
 
 def _operators_csv(n: int, seed: int) -> str:
