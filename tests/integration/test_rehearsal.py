@@ -478,8 +478,8 @@ def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):
             tilt_max_deg=45.0,
             directions=5,
             settle_s=0.3,
-            max_angular_speed=1.0,
-            gain_orientation=4.0,
+            max_angular_speed=1.5,
+            gain_orientation=8.0,
         )
         run = calibrate(
             world.robot(),
@@ -487,6 +487,7 @@ def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):
             R_TS=rehearsal_config(world, tmp_path).robot.R_TS,
             params=params,
             samples=100,
+            acceleration=2.0,
         )
         after = stopped_state(world.robot())
     truth = world.truth
