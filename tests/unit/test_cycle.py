@@ -12,6 +12,7 @@ import pytest
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.cycle import ControlBlocks, Event, Reading, SensorSetup, control_cycle
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.follow import FollowParams
 from hoh_cosim.control.frames import R_BS_EQ1, R_SP_SEED, rotvec_to_matrix
 from hoh_cosim.control.gravity import SEED_TOOL, tool_weight_wrench_S
 from hoh_cosim.control.probe_correction import ProbeCorrectionParams
@@ -150,9 +151,13 @@ def session(
     return out
 
 
-def blocks_for(estimator: EstimatorParams, policy: SessionPolicy | None = None) -> ControlBlocks:
+def blocks_for(
+    estimator: EstimatorParams,
+    policy: SessionPolicy | None = None,
+    controller: ControllerParams | None = None,
+) -> ControlBlocks:
     setup = SensorSetup(FT_EVERY * DT, PROBE_EVERY * DT, estimator.use_probe)
-    estimator, controller = setup.apply(estimator, ControllerParams())
+    estimator, controller = setup.apply(estimator, controller or ControllerParams())
     if policy is None:
         policy = SessionPolicy(controller.limits, probe="FSE103" if setup.use_probe else None)
     return ControlBlocks(Estimator(estimator), HandGuidingController(controller), policy)
@@ -339,3 +344,36 @@ def test_probe_drift_is_announced_once_each_way(rng):
     assert on == Event("probe drift", text, f"warning: {text}")
     text = "the two sensors agree again (2.0 N)"
     assert off == Event("probe drift", text, text)
+
+
+def test_following_the_breath_is_announced_when_it_starts_and_stops(rng):
+    # the probe pressed 6 N along its axis (tip at -z of the wrist sensor) from cycle 300 to 900,
+    # no hand: the follow starts with the contact and stops after it
+    def contact_B(k: int) -> np.ndarray:
+        t = k * DT
+        R_BS = R_BS_EQ1 @ rotvec_to_matrix(0.2 * np.sin([0.7 * t, 1.1 * t, 0.5 * t]))
+        return 6.0 * (R_BS @ np.array([0.0, 0.0, 1.0])) if 300 <= k < 900 else np.zeros(3)
+
+    blocks = blocks_for(
+        check_params("none", check_s=0.0),
+        controller=ControllerParams(follow=FollowParams(enabled=True)),
+    )
+    events, flags = [], []
+    for k, reading in enumerate(session(1200, rng, hand_from=10**9, contact_B=contact_B)):
+        cycle = control_cycle(blocks, reading, k * DT, DT)
+        events += [(k, e) for e in cycle.events]
+        flags.append(int(cycle.command["status"][0]) & int(Status.FOLLOWING))
+    assert [e.name for _, e in events] == ["follow", "follow"]
+    (k_on, on), (k_off, off) = events
+    assert 300 < k_on < 350  # the probe's filter crossing the 3 N contact
+    assert 900 < k_off < 1000
+    assert re.fullmatch(
+        r"ROBOT FOLLOWS THE BREATH: following the breath along the probe about \d\.\d N",
+        on.announcement,
+    )
+    assert off == Event(
+        "follow", "no longer following the breath", "robot: no longer following the breath"
+    )
+    assert all(flags[k_on:k_off])
+    assert not any(flags[:k_on])
+    assert not any(flags[k_off:])

@@ -15,6 +15,9 @@ Per tick:
                or has asked for nothing a while, the robot holds the probe's axial contact force
                (a PI along the probe axis) and the rest of the pose, until a touch of the handle
                hands back (blended) or the contact is lost (then rest)
+    follow     following the breath while the hand steers (`hoh_cosim.control.follow`, if on; not
+               while braking or holding): in contact, the axial contact force's departure from its
+               level over about a breath, g (c - c̄) / k̂, is added along the probe axis
     passivity  the passivity observer and controller with its energy tank
                (`hoh_cosim.control.passivity`, if on; not while braking or holding): the command
                yields to the hand when the robot has given back more energy than it took
@@ -49,6 +52,7 @@ from hoh_cosim.control.admittance import (
     horizontal_fixture,
 )
 from hoh_cosim.control.block import TWIST_UNITS, Port
+from hoh_cosim.control.follow import BreathFollower, FollowParams
 from hoh_cosim.control.hold import ContactHold, HoldEnd, HoldParams, HoldPhase
 from hoh_cosim.control.kernels import passivity_controller, release_detector, variable_law
 from hoh_cosim.control.passivity import PassivityParams
@@ -76,6 +80,7 @@ _BRAKING = int(Status.BRAKING)
 _PASSIVITY = int(Status.PASSIVITY)
 _HOLDING = int(Status.HOLDING) | _RELEASED  # the hand let go: RELEASED too
 _HANDING_BACK = int(Status.HANDING_BACK)
+_FOLLOWING = int(Status.FOLLOWING)
 _LATCHED = int(LATCHED_FLAGS)
 _STOP = int(STOP_FLAGS)
 
@@ -108,6 +113,7 @@ class ControllerParams:
             "variable",
             "passivity",
             "hold",
+            "follow",
         }
     )
 
@@ -127,6 +133,7 @@ class ControllerParams:
     variable: VariableAdmittanceParams = field(default_factory=VariableAdmittanceParams)
     passivity: PassivityParams = field(default_factory=PassivityParams)
     hold: HoldParams = field(default_factory=HoldParams)  # hold-on-release
+    follow: FollowParams = field(default_factory=FollowParams)  # the breath, while steered
     use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
     ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
@@ -212,6 +219,7 @@ class HandGuidingController:
             self._variable.params = params.variable
             self._passivity.params = params.passivity
             self._hold.params = params.hold
+            self._follow.params = params.follow
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
         tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None
@@ -233,6 +241,7 @@ class HandGuidingController:
         self._variable = variable_law(self.params.variable)
         self._passivity = passivity_controller(self.params.passivity)
         self._hold = ContactHold(self.params.hold)
+        self._follow = BreathFollower(self.params.follow)
 
     @property
     def release(self) -> ReleaseDetector:
@@ -244,6 +253,11 @@ class HandGuidingController:
         no cycle of a robot's loop pays for it."""
         if self.params.hold.enabled:
             self._hold.prepare(dt)
+
+    @property
+    def follow(self) -> BreathFollower:
+        """Following the breath while the hand steers, and its state (level, blend)."""
+        return self._follow
 
     @property
     def hold(self) -> ContactHold:
@@ -274,6 +288,7 @@ class HandGuidingController:
             self._variable.reset()
             self._passivity.reset()
             self._hold.stop()
+            self._follow.stop()
             return {
                 "twist_B": np.zeros(6),
                 "twist_law_B": np.zeros(6),
@@ -390,6 +405,15 @@ class HandGuidingController:
             v, engaged = horizontal_fixture(v, F_probe, p.fixture_threshold_N, up)
             if engaged:
                 status |= _FIXTURE
+        if p.use_probe and p.follow.enabled:
+            axis = inputs.get("probe_axis_B")
+            if braking or holding or axis is None or not axis.any():
+                self._follow.stop()
+            else:
+                v_follow = self._follow.step(dt, F, F_probe, axis)
+                if v_follow is not None:
+                    v = v + v_follow
+                    status |= _FOLLOWING
         v, w, clamped = limit_command(
             v,
             w,

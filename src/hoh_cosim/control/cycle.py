@@ -150,6 +150,7 @@ class ControlBlocks:
         self.checking = estimator.checking and policy.probe is not None
         self.drifted = False
         self.holding = False  # hold-on-release has the probe (announced)
+        self.following = False  # the breath is followed (announced)
         # reused every cycle: the estimator reads them during its step only
         self._ft_counter = np.zeros(1)
         self._probe_counter = np.zeros(1)
@@ -191,9 +192,9 @@ def control_cycle(
     )
     command = controller.step(t, dt, {**estimate, "p_BT_B": reading.p_BT_B})
     events = _session_events(blocks, estimate)
-    hold = _hold_event(blocks)
-    if hold is not None:
-        events.append(hold)
+    for event in (_hold_event(blocks), _follow_event(blocks)):
+        if event is not None:
+            events.append(event)
     verdict = supervise(
         blocks.policy,
         Status(int(command["status"][0])),
@@ -251,6 +252,20 @@ def _hold_event(blocks: ControlBlocks) -> Event | None:
     why = _HOLD_ENDS.get(hold.ended, hold.ended.name.lower())
     text = f"hold ended: {why}; at rest until the hand pushes"
     return Event("hold", text, f"ROBOT STOPS HOLDING: {why}; at rest until the hand pushes")
+
+
+def _follow_event(blocks: ControlBlocks) -> Event | None:
+    """The robot began following the patient's breath along the probe, or stopped, if it did in
+    this cycle: one line for the operator, and the log's "follow" event."""
+    follow = blocks.controller.follow
+    if follow.active == blocks.following:
+        return None
+    blocks.following = follow.active
+    if follow.active:
+        text = f"following the breath along the probe about {follow.level_N:.1f} N"
+        return Event("follow", text, f"ROBOT FOLLOWS THE BREATH: {text}")
+    text = "no longer following the breath"
+    return Event("follow", text, f"robot: {text}")
 
 
 _HOLD_ENDS = {

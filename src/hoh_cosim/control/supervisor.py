@@ -96,6 +96,7 @@ class Status(enum.IntFlag):
     NOT_READY = 1 << 12
     HOLDING = 1 << 13  # hold-on-release: the robot holds the probe's contact force
     HANDING_BACK = 1 << 14  # a touch of the handle: the law's command blended in
+    FOLLOWING = 1 << 15  # in contact, the hand steering: the breath followed along the probe
 
     @property
     def ok(self) -> bool:
@@ -124,6 +125,7 @@ _DESCRIPTIONS = {
     Status.RELEASED: "hand released: holding at rest",
     Status.HOLDING: "hand released in contact: holding the contact force",
     Status.HANDING_BACK: "handing back to the hand",
+    Status.FOLLOWING: "following the breath",
     Status.BRAKING: "braking to rest",
     Status.PASSIVITY: "passivity controller acting",
     Status.FORCE_STOP: "probe force above the stop limit (latched)",

@@ -1,0 +1,150 @@
+"""Following the breath while the hand steers: the patient's breathing taken out of the contact force.
+
+Eq. 10 moves the probe only where the hand pushes it (seed 000, 3.F.1), and contact compensation
+(eq. 11-12) keeps the patient's reaction out of the hand's force (3.F.2). On a breathing patient the
+robot therefore holds the probe's depth while the abdomen rises and falls under it: the contact force
+swings by the breath's depth times the tissue's stiffness (10 mm on about 1200 N/m is 12 N), and the
+hand must steer the probe up and down with every breath to keep its level. Freehand, the hand's own
+compliance rides the breath. Hold-on-release (`hoh_cosim.control.hold`) regulates the force once
+the hand lets go; this block does the breath's part of that while the hand steers:
+
+    c        the axial contact force, pressing positive: c = -F_probe · a, with a the probe axis
+             (handle to tip) and F_probe the estimator's contact-force estimate
+    level    c̄, the force the sonographer keeps: c low-passed over `level_s` (about a breath, so the
+             breath's swing is not in it); while the hand pushes or pulls along the axis
+             (|F̃ · a| > `push_band_N`, F̃ the compensated hand force of eq. 11-12) over
+             `push_level_s` instead, so that a deliberate push sets a new level rather than being
+             fought. Set to c when the contact begins, kept while it ends
+    command  v_f = -β g (c - c̄) / k̂ · a,   |v_f| <= `max_speed`
+             added to the law's command along the axis; β goes from 0 to 1 over `blend_s` once
+             c > `contact_N` and back to 0 over `release_s` when it falls under it
+
+With the tissue c = k (s - z) (s the surface, z the tip, both along a), ċ = k ṡ - g (k / k̂) (c - c̄):
+the breath's force swing k ṡ passes through a first-order high-pass at ω_c = g k / k̂, and what is
+left at the breath's angular frequency ω is ω / √(ω² + ω_c²) of it (about 0.4-0.6 at 12-20 breaths
+a minute for g = 3 /s and k̂ = k). The level's time constant makes the loop's low corner, 1 / level_s,
+well under the breath. The probe force's noise reaches the tip through g / k̂ = 0.0025 m/(s·N), a
+fifth of eq. 10's slope, and only in contact. A k̂ off by a factor ρ = k / k̂ scales ω_c by ρ; the
+loop is one integrator and stays stable for any ρ > 0 while ω_c is well under the sensors' and the
+robot's delays' corner (about 25 rad/s for 40 ms).
+
+The follow moves the probe by itself, so it is bounded like the hold: its command since the
+contact began, or since the hand last pushed along the axis (the depth is the hand's then), is kept
+within `max_travel_m` (more than a deep breath's 15 mm); its speed within `max_speed`; the
+supervisor's limits (speed, acceleration, soft force cap, workspace, stops) apply after it as to
+every command; it never acts out of contact, while the release detector brakes, or while the hold
+holds. Off by default (docs/decisions.md, "Following the breath while the hand steers").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hoh_cosim.control.vectors import Vec3, as_scalar
+
+__all__ = ["BreathFollower", "FollowParams"]
+
+
+@dataclass(frozen=True)
+class FollowParams:
+    """Following the breath while the hand steers (module docstring)."""
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "gain_per_s": "1/s",
+        "stiffness_N_m": "N/m",
+        "level_s": "s",
+        "push_level_s": "s",
+        "push_band_N": "N",
+        "contact_N": "N",
+        "blend_s": "s",
+        "release_s": "s",
+        "max_speed": "m/s",
+        "max_travel_m": "m",
+    }
+
+    enabled: bool = False
+    gain_per_s: float = 3.0  # g [1/s]: the high-pass's corner with k̂ = k
+    stiffness_N_m: float = 1200.0  # k̂ [N/m], as the hold's
+    level_s: float = 4.0  # [s] the level's low-pass: about a breath at 15 a minute
+    push_level_s: float = 0.1  # [s] ... while the hand pushes along the axis
+    push_band_N: float = 1.0  # [N] |F̃ · a| above this is the hand's push (the hold's retake band)
+    contact_N: float = 3.0  # [N] the probe force above which the breath is followed
+    blend_s: float = 0.5  # [s] the follow's way in once the contact begins
+    release_s: float = 0.1  # [s] ... and out once it ends
+    max_speed: float = 0.03  # [m/s] the follow's own speed limit (a deep fast breath needs 0.02)
+    max_travel_m: float = 0.02  # [m] the farthest the follow moves the tip by itself
+
+    def __post_init__(self) -> None:
+        for name in (
+            "gain_per_s",
+            "stiffness_N_m",
+            "level_s",
+            "push_level_s",
+            "push_band_N",
+            "contact_N",
+            "blend_s",
+            "release_s",
+            "max_speed",
+            "max_travel_m",
+        ):
+            object.__setattr__(
+                self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
+            )
+
+
+class BreathFollower:
+    """The follow of the module docstring, one controller tick at a time, in floats."""
+
+    def __init__(self, params: FollowParams | None = None) -> None:
+        self.params = params or FollowParams()
+        self.reset()
+
+    def reset(self) -> None:
+        self.level_N = 0.0  # c̄
+        self.blend = 0.0  # β
+        self.travel_m = 0.0  # the follow's own command integrated since its origin
+        self._contact = False
+
+    @property
+    def active(self) -> bool:
+        """The follow is in the command (β > 0)."""
+        return self.blend > 0.0
+
+    def stop(self) -> None:
+        """Out of the command at once (a stop, a brake, a hold): the next contact starts afresh."""
+        self.reset()
+
+    def step(self, dt: float, F_tilde: Vec3, F_probe: Vec3, axis: Vec3) -> Vec3 | None:
+        """The follow's velocity along `axis` for this tick (in B), or None while it is out.
+        F_tilde: the compensated hand force; F_probe: the contact-force estimate; both in B."""
+        p = self.params
+        a0, a1, a2 = axis.tolist()
+        f0, f1, f2 = F_probe.tolist()
+        c = -(f0 * a0 + f1 * a1 + f2 * a2)
+        if c > p.contact_N:
+            h0, h1, h2 = F_tilde.tolist()
+            pushing = abs(h0 * a0 + h1 * a1 + h2 * a2) > p.push_band_N
+            if not self._contact or pushing:
+                self.travel_m = 0.0
+            if not self._contact:
+                self._contact = True
+                self.level_N = c
+            tau = p.push_level_s if pushing else p.level_s
+            self.level_N += (c - self.level_N) * min(1.0, dt / tau)
+            self.blend = min(1.0, self.blend + dt / p.blend_s)
+        else:  # the level kept: what is left of the blend still answers the force's fall
+            self._contact = False
+            self.blend = max(0.0, self.blend - dt / p.release_s)
+            if self.blend == 0.0:
+                self.travel_m = 0.0
+                return None
+        u = -self.blend * p.gain_per_s * (c - self.level_N) / p.stiffness_N_m
+        u = min(max(u, -p.max_speed), p.max_speed)
+        if dt > 0.0:  # no farther than max_travel_m from the origin
+            reach = min(max(self.travel_m + u * dt, -p.max_travel_m), p.max_travel_m)
+            u = (reach - self.travel_m) / dt
+            self.travel_m = reach
+        return np.array((u * a0, u * a1, u * a2))
