@@ -273,6 +273,13 @@ three operators' quick runs, was worse over the full study's twenty on every cou
 jitter: docs/decisions.md, "Hold-on-release"."""
 
 
+FOLLOW_BREATH = (*PROBE_CHECK, "controller.follow.enabled=true")
+"""Today's defaults after a probe check, the robot following the breath while the hand steers
+(`hoh_cosim.control.follow`): in contact, the axial contact force's departure from its level over
+about a breath moves the probe along its axis, so the hand no longer steers it up and down with
+every breath (docs/decisions.md, "Following the breath while the hand steers")."""
+
+
 @dataclass(frozen=True)
 class Mode:
     """How the probe is held: freehand, or by the robot under a law (overrides of the assisted
@@ -326,6 +333,12 @@ MODES: dict[str, Mode] = {
             "clinical_assisted.yaml",
             HOLD_ON_RELEASE,
             lets_go=True,
+        ),
+        Mode(
+            "follow",
+            "assisted, following the breath after a probe check",
+            "clinical_assisted.yaml",
+            FOLLOW_BREATH,
         ),
     )
 }
@@ -846,7 +859,12 @@ _COLOURS = {
     "checked": "tab:brown",
     "transparency": "tab:orange",
     HOLD: "tab:purple",
+    "follow": "tab:cyan",
 }
+
+
+_PANEL_IN = 0.75 * len(MODES)
+"""[in] A task's panel in the per-mode figures: room for each mode's wrapped label."""
 
 
 def _colour(mode: str) -> str:
@@ -855,7 +873,7 @@ def _colour(mode: str) -> str:
 
 def _tick(mode: str) -> str:
     """A mode's label on an axis: without "assisted, " (every robot mode is), wrapped to fit the
-    width a mode has in a row of six."""
+    width a mode has in a task's panel (`_PANEL_IN`)."""
     label = MODES[mode].label.removeprefix("assisted, ")
     return textwrap.fill(label, 12, break_on_hyphens=False, break_long_words=False)
 
@@ -871,7 +889,9 @@ def _figures(
     labels = [_tick(m) for m in modes]
 
     def by_operator(fig_name: str, key: str, scale: float, ylabel: str, title: str) -> None:
-        fig, axes = plt.subplots(1, len(TASKS), figsize=(4.2 * len(TASKS), 4.2), squeeze=False)
+        fig, axes = plt.subplots(
+            1, len(TASKS), figsize=(_PANEL_IN * len(TASKS), 4.2), squeeze=False
+        )
         for ax, task in zip(axes[0], TASKS, strict=True):
             for i in range(n):
                 ys = [_metric(got.get((i, task, m)), key) for m in modes]
@@ -906,7 +926,7 @@ def _figures(
     )
 
     # reductions against Fang 2017 and the target
-    fig, axes = plt.subplots(1, len(TASKS), figsize=(4.2 * len(TASKS), 4.2), squeeze=False)
+    fig, axes = plt.subplots(1, len(TASKS), figsize=(_PANEL_IN * len(TASKS), 4.2), squeeze=False)
     lo, hi = FANG_2017["hand_force_reduction_pct"]
     for ax, task in zip(axes[0], TASKS, strict=True):
         ax.axhspan(lo, hi, color="0.9", label="Fang 2017: 32-73 %")
