@@ -15,9 +15,6 @@ Per tick:
                or has asked for nothing a while, the robot holds the probe's axial contact force
                (a PI along the probe axis) and the rest of the pose, until a touch of the handle
                hands back (blended) or the contact is lost (then rest)
-    follow     following the breath while the hand steers (`hoh_cosim.control.follow`, if on; not
-               while braking or holding): in contact, the axial contact force's departure from its
-               level over about a breath, g (c - c̄) / k̂, is added along the probe axis
     passivity  the passivity observer and controller with its energy tank
                (`hoh_cosim.control.passivity`, if on; not while braking or holding): the command
                yields to the hand when the robot has given back more energy than it took
@@ -25,6 +22,11 @@ Per tick:
                holding): along `fixture_up_B` (the seed's horizontal plane) or, with
                `fixture_normal` = contact, along the estimated surface normal, the probe force's
                direction
+    follow     following the breath while the hand steers (`hoh_cosim.control.follow`, if on; not
+               while braking or holding): in contact, the axial contact force's departure from its
+               level over about a breath, g (c - c̄) / k̂, is added along the probe axis, after the
+               fixture (which keeps the hand from lifting the probe off; riding a rising abdomen
+               is not that)
     limits     the supervisor's `limit_command`: speed clamp · acceleration clamp (the braking
                deceleration towards rest after a release) · probe-force soft cap · workspace box
 

@@ -33,7 +33,9 @@ contact began, or since the hand last pushed along the axis (the depth is the ha
 within `max_travel_m` (more than a deep breath's 15 mm); its speed within `max_speed`; the
 supervisor's limits (speed, acceleration, soft force cap, workspace, stops) apply after it as to
 every command; it never acts out of contact, while the release detector brakes, or while the hold
-holds. Off by default (docs/decisions.md, "Following the breath while the hand steers").
+holds. Without contact compensation F̃ holds the contact too, reads as a push, and the level follows
+c at once: the follow then does nothing. Off by default (docs/decisions.md, "Following the breath
+while the hand steers").
 """
 
 from __future__ import annotations
