@@ -555,8 +555,10 @@ def test_hold_on_release_on_a_breathing_phantom_takes_over_and_gives_back(tmp_pa
     """The hand reaches a view on a phantom breathing 10 mm deep, lets go, takes the handle again
     and moves on to the next view: the robot takes the probe over (announced, logged, HOLDING in
     the status), keeps the contact through the breaths while the tip rides them, and gives the
-    probe back at the touch (announced, HANDING_BACK)."""
+    probe back at the touch (announced, HANDING_BACK). While the hand steers in contact the robot
+    follows the breath (announced, logged, FOLLOWING), never while it holds."""
     from hoh_cosim.control.controller import ControllerParams
+    from hoh_cosim.control.follow import FollowParams
     from hoh_cosim.control.hold import HoldParams
     from hoh_cosim.control.release import ReleaseParams
     from hoh_cosim.control.supervisor import Status
@@ -579,7 +581,9 @@ def test_hold_on_release_on_a_breathing_phantom_takes_over_and_gives_back(tmp_pa
                 let_go_s=7.0,
                 retake_s=10.0,
                 controller=ControllerParams(
-                    release=ReleaseParams(enabled=True), hold=HoldParams(enabled=True)
+                    release=ReleaseParams(enabled=True),
+                    hold=HoldParams(enabled=True),
+                    follow=FollowParams(enabled=True),
                 ),
             ),
             announce=said.append,
@@ -592,11 +596,18 @@ def test_hold_on_release_on_a_breathing_phantom_takes_over_and_gives_back(tmp_pa
     assert takes, said
     assert gives, said
     assert said.index(takes[0]) < said.index(gives[-1])
+    follows = [s for s in said if s.startswith("ROBOT FOLLOWS THE BREATH")]
+    assert follows, said
+    assert said.index(follows[0]) < said.index(takes[0])  # the hand steered in contact first
     log = read_session(log_path)
     assert log.complete
     assert [m["detail"] for m in log.messages["/events"] if m["event"] == "hold"]
+    assert [m["detail"] for m in log.messages["/events"] if m["event"] == "follow"]
     status = np.array([m["status"] for m in log.messages["/command"]])
     holding = (status & int(Status.HOLDING)) != 0
+    following = (status & int(Status.FOLLOWING)) != 0
+    assert np.any(following)
+    assert not np.any(following & holding)
     assert np.any(status & int(Status.HANDING_BACK))
     # every held cycle but the first and last half second of each hold (the hand-off spans 3 s
     # of them; where the world's clock stands against the loop's depends on how busy the machine
