@@ -979,13 +979,16 @@ def _figures(
         ax.set_ylabel("contact force [N]", fontsize=8)
         ax.set_title(f"{task}: operator 1, the last 12 s (dashed: the target)", fontsize=9)
         ax.grid(True, lw=0.4, color="0.9")
-    axes[0, 0].legend(fontsize=7, loc="upper left", ncol=len(modes))
     axes[-1, 0].set_xlabel("time since the hand took the probe [s]")
     fig.suptitle(
         "The contact force (along the probe, pressing) through the patient's breaths, every mode",
         fontsize=10,
     )
-    fig.tight_layout()
+    # the modes' labels under the panels, in rows, so that the panels keep the figure's width
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    rows = math.ceil(len(names) / 3)
+    fig.legend(handles, names, loc="lower center", ncol=3, fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.025 * rows, 1.0, 1.0))
     figures["breath.png"] = png(fig)
     return figures
 
