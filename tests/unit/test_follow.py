@@ -1,6 +1,7 @@
 """Following the breath while the hand steers, in the controller: the breath's swing out of the
 contact force as the loop predicts, a push that sets a new level, nothing out of contact and no step
-into it, the travel bound, and nothing while the hold holds."""
+into it, a short gap in the contact that keeps the level, the travel bound, and nothing while the
+hold holds."""
 
 from __future__ import annotations
 
@@ -84,6 +85,29 @@ def test_no_follow_out_of_contact_and_no_step_into_it():
     # the level starts at the contact's force: the first command is rest, not a step
     assert np.all(out["twist_B"] == 0.0)
     assert ctl.follow.level_N == pytest.approx(K * 0.004)
+
+
+def test_a_short_gap_in_the_contact_keeps_the_level_and_a_long_one_starts_afresh():
+    # 9.6 N held, then the skin off the probe (an exhale's trough, or the probe lifted) for 0.5 s or
+    # 6 s, then back at 4.8 N: within level_s (4 s) it is the same contact, and the follow takes the
+    # force back up towards its level; after it, a new contact with the force it began with
+    for gap, kept in ((0.5, True), (6.0, False)):
+        ctl = following_controller()
+        patient = Patient(amplitude_m=0.0)
+        run(ctl, patient, 0.0, 2.0)
+        assert ctl.follow.level_N == pytest.approx(K * 0.008)
+        patient.z = 0.3 + 0.010
+        _, flags, _ = run(ctl, patient, 2.0, 2.0 + gap)
+        assert not flags[-1] & FOLLOWING
+        patient.z = 0.3 - 0.004
+        forces, _, _ = run(ctl, patient, 2.0 + gap, 5.0 + gap)
+        assert forces[0] == pytest.approx(K * 0.004, abs=0.05)
+        if kept:  # the force and the level meet between the two: 9.0 N after 3 s
+            assert forces[-1] > 8.0
+            assert ctl.follow.level_N > 8.0
+        else:
+            assert forces[-1] == pytest.approx(K * 0.004, abs=0.1)
+            assert ctl.follow.level_N == pytest.approx(K * 0.004, abs=0.1)
 
 
 def test_the_follow_moves_the_tip_no_farther_than_its_travel():

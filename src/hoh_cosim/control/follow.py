@@ -14,7 +14,9 @@ the hand lets go; this block does the breath's part of that while the hand steer
              breath's swing is not in it); while the hand pushes or pulls along the axis
              (|F̃ · a| > `push_band_N`, F̃ the compensated hand force of eq. 11-12) over
              `push_level_s` instead, so that a deliberate push sets a new level rather than being
-             fought. Set to c when the contact begins, kept while it ends
+             fought. Set to c when the contact begins; kept while it ends, and through a gap in the
+             contact shorter than `level_s` (an exhale's trough that lifts the skin off the probe
+             is no new contact)
     command  v_f = -β g (c - c̄) / k̂ · a,   |v_f| <= `max_speed`
              added to the law's command along the axis; β goes from 0 to 1 over `blend_s` once
              c > `contact_N` and back to 0 over `release_s` when it falls under it
@@ -29,7 +31,8 @@ loop is one integrator and stays stable for any ρ > 0 while ω_c is well under 
 robot's delays' corner (about 25 rad/s for 40 ms).
 
 The follow moves the probe by itself, so it is bounded like the hold: its command since the
-contact began, or since the hand last pushed along the axis (the depth is the hand's then), is kept
+contact began (a gap shorter than `level_s` is the same contact), or since the hand last pushed
+along the axis (the depth is the hand's then), is kept
 within `max_travel_m` (more than a deep breath's 15 mm); its speed within `max_speed`; the
 supervisor's limits (speed, acceleration, soft force cap, workspace, stops) apply after it as to
 every command; it never acts out of contact, while the release detector brakes, or while the hold
@@ -40,6 +43,7 @@ while the hand steers").
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -109,6 +113,7 @@ class BreathFollower:
         self.blend = 0.0  # β
         self.travel_m = 0.0  # the follow's own command integrated since its origin
         self._contact = False
+        self._gap_s = math.inf  # how long the contact has been lost (inf: no level to keep)
 
     @property
     def active(self) -> bool:
@@ -129,19 +134,22 @@ class BreathFollower:
         if c > p.contact_N:
             h0, h1, h2 = F_tilde.tolist()
             pushing = abs(h0 * a0 + h1 * a1 + h2 * a2) > p.push_band_N
-            if not self._contact or pushing:
-                self.travel_m = 0.0
             if not self._contact:
                 self._contact = True
-                self.level_N = c
+                if self._gap_s > p.level_s:  # a new contact: its own level and origin
+                    self.level_N = c
+                    self.travel_m = 0.0
+                self._gap_s = 0.0
+            if pushing:
+                self.travel_m = 0.0
             tau = p.push_level_s if pushing else p.level_s
             self.level_N += (c - self.level_N) * min(1.0, dt / tau)
             self.blend = min(1.0, self.blend + dt / p.blend_s)
         else:  # the level kept: what is left of the blend still answers the force's fall
             self._contact = False
+            self._gap_s += dt
             self.blend = max(0.0, self.blend - dt / p.release_s)
             if self.blend == 0.0:
-                self.travel_m = 0.0
                 return None
         u = -self.blend * p.gain_per_s * (c - self.level_N) / p.stiffness_N_m
         u = min(max(u, -p.max_speed), p.max_speed)
