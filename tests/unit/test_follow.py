@@ -39,13 +39,13 @@ def test_the_breaths_swing_leaves_the_contact_as_the_loop_predicts():
     ctl = following_controller()
     forces, flags, _ = run(ctl, Patient(amplitude_m=0.005), 0.0, 24.0)
     assert np.all(flags[round(0.5 / DT) :] & FOLLOWING)
-    # a first-order high-pass at ω_c = g k / k̂ = 3 /s leaves ω / √(ω² + ω_c²) = 0.46 of the swing at
-    # ω = 2π · 0.25 /s; the level's low-pass (4 s) takes a little of the breath into the level and
-    # leaves more: the ratio is between the high-pass's and 0.6, far under a still robot's 1
-    omega = 2 * math.pi * 0.25
-    predicted = omega / math.hypot(omega, 3.0)
+    # with c̄ the level, c̄' = (c - c̄) / τ, and k̂ = k: c = k s (1 + τ p) / (1 + g τ + τ p), so the
+    # swing left at ω = 2π · 0.25 /s is |1 + jωτ| / |1 + gτ + jωτ| = 0.44 (g = 3 /s, τ = 4 s; 0.46,
+    # the first-order high-pass's ω / √(ω² + g²), for a level that never moves)
+    omega, g, tau = 2 * math.pi * 0.25, 3.0, 4.0
+    predicted = abs(complex(1.0, omega * tau) / complex(1.0 + g * tau, omega * tau))
     ratio = swing(forces) / swing(still)
-    assert predicted - 0.05 < ratio < 0.6
+    assert ratio == pytest.approx(predicted, abs=0.05)
     # the level is the sonographer's: the mean force stays where the contact began (9.6 N)
     assert np.mean(forces[-round(8.0 / DT) :]) == pytest.approx(K * 0.008, abs=0.6)
 

@@ -22,10 +22,11 @@ the hand lets go; this block does the breath's part of that while the hand steer
              c > `contact_N` and back to 0 over `release_s` when it falls under it
 
 With the tissue c = k (s - z) (s the surface, z the tip, both along a), ċ = k ṡ - g (k / k̂) (c - c̄):
-the breath's force swing k ṡ passes through a first-order high-pass at ω_c = g k / k̂, and what is
-left at the breath's angular frequency ω is ω / √(ω² + ω_c²) of it (about 0.4-0.6 at 12-20 breaths
-a minute for g = 3 /s and k̂ = k). The level's time constant makes the loop's low corner, 1 / level_s,
-well under the breath. The probe force's noise reaches the tip through g / k̂ = 0.0025 m/(s·N), a
+for a level that did not move, the breath's force swing k ṡ would pass through a first-order
+high-pass at ω_c = g k / k̂, leaving ω / √(ω² + ω_c²) of it at the breath's angular frequency ω
+(about 0.4-0.6 at 12-20 breaths a minute for g = 3 /s and k̂ = k). With the level's low-pass
+(τ = `level_s`) it is |1 + jωτ| / |1 + ω_c τ + jωτ|, a little less (0.44 against 0.46 at 15 a
+minute): the level's corner, 1 / τ, is well under the breath. The probe force's noise reaches the tip through g / k̂ = 0.0025 m/(s·N), a
 fifth of eq. 10's slope, and only in contact. A k̂ off by a factor ρ = k / k̂ scales ω_c by ρ; the
 loop is one integrator and stays stable for any ρ > 0 while ω_c is well under the sensors' and the
 robot's delays' corner (about 25 rad/s for 40 ms).
