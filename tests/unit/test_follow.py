@@ -130,7 +130,7 @@ def test_the_follow_moves_the_tip_no_farther_than_its_travel():
     assert forces[-1] > 1.0
 
 
-def test_the_hold_holds_alone_and_the_follow_starts_afresh_after_it():
+def test_the_hold_holds_alone_and_the_follow_stands_aside_and_forgets_its_level():
     ctl = HandGuidingController(
         ControllerParams(
             release=ReleaseParams(enabled=True),
@@ -146,6 +146,7 @@ def test_the_hold_holds_alone_and_the_follow_starts_afresh_after_it():
     assert np.all(flags[: round(0.5 / DT)] & FOLLOWING)  # before it, the breath was followed
     assert not ctl.follow.active
     assert ctl.follow.travel_m == 0.0
+    assert ctl.follow.level_N == 0.0  # after the hold, a contact of its own
 
 
 def test_following_is_off_by_default():
