@@ -113,6 +113,12 @@ def test_shared_refuses_a_controller_that_contradicts_the_estimator():
 # --- control_cycle ------------------------------------------------------------------------------
 
 
+def wrist_turn(k: int) -> np.ndarray:
+    """R_BS at cycle k of `session`: the wrist turning slowly about the calibration's pose."""
+    t = k * DT
+    return R_BS_EQ1 @ rotvec_to_matrix(0.2 * np.sin([0.7 * t, 1.1 * t, 0.5 * t]))
+
+
 def session(
     n: int,
     rng: np.random.Generator,
@@ -133,7 +139,7 @@ def session(
     out = []
     for k in range(n):
         t = k * DT
-        R_BS = R_BS_EQ1 @ rotvec_to_matrix(0.2 * np.sin([0.7 * t, 1.1 * t, 0.5 * t]))
+        R_BS = wrist_turn(k)
         if k % FT_EVERY == 0 and k >= first_ft and k not in ft_gap:
             push = amplitude * np.sin(2.0 * np.pi * 0.8 * t + phase) if k >= hand_from else 0
             push = push + np.concatenate([contact_B(k), np.zeros(3)])
@@ -350,9 +356,7 @@ def test_following_the_breath_is_announced_when_it_starts_and_stops(rng):
     # the probe pressed 6 N along its axis (tip at -z of the wrist sensor) from cycle 300 to 900,
     # no hand: the follow starts with the contact and stops after it
     def contact_B(k: int) -> np.ndarray:
-        t = k * DT
-        R_BS = R_BS_EQ1 @ rotvec_to_matrix(0.2 * np.sin([0.7 * t, 1.1 * t, 0.5 * t]))
-        return 6.0 * (R_BS @ np.array([0.0, 0.0, 1.0])) if 300 <= k < 900 else np.zeros(3)
+        return 6.0 * (wrist_turn(k) @ np.array([0.0, 0.0, 1.0])) if 300 <= k < 900 else np.zeros(3)
 
     blocks = blocks_for(
         check_params("none", check_s=0.0),
