@@ -986,9 +986,9 @@ def _figures(
     )
     # the modes' labels under the panels, in rows, so that the panels keep the figure's width
     handles, names = axes[0, 0].get_legend_handles_labels()
-    rows = math.ceil(len(names) / 3)
-    fig.legend(handles, names, loc="lower center", ncol=3, fontsize=7, frameon=False)
-    fig.tight_layout(rect=(0.0, 0.025 * rows, 1.0, 1.0))
+    columns = 3
+    fig.legend(handles, names, loc="lower center", ncol=columns, fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.025 * math.ceil(len(names) / columns), 1.0, 1.0))
     figures["breath.png"] = png(fig)
     return figures
 
