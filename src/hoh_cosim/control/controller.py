@@ -9,6 +9,9 @@ Per tick:
                τ̃ = τ_hand - p_RT × F_probe (the contact's moment about the torque's reference
                point, `contact_torque`); v = law(F̃) (eq. 10 or an alternative: `variable` adapts
                eq. 10's slope to the hand's intent), ω = law(τ̃)
+    glide      eq. 10 lighter for a steady push than for a quick one, and with a smaller deadband
+               once the probe moves (`hoh_cosim.control.glide`, if on; eq. 10's law only): part
+               of the law, before the release detector reads it
     release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at
                `max_brake_accel`, until the hand pushes again
     hold       hold-on-release (`hoh_cosim.control.hold`, if on): in contact, once the hand let go
@@ -55,6 +58,7 @@ from hoh_cosim.control.admittance import (
 )
 from hoh_cosim.control.block import TWIST_UNITS, Port
 from hoh_cosim.control.follow import BreathFollower, FollowParams
+from hoh_cosim.control.glide import Glide, GlideParams
 from hoh_cosim.control.hold import ContactHold, HoldEnd, HoldParams, HoldPhase
 from hoh_cosim.control.kernels import passivity_controller, release_detector, variable_law
 from hoh_cosim.control.passivity import PassivityParams
@@ -116,6 +120,7 @@ class ControllerParams:
             "passivity",
             "hold",
             "follow",
+            "glide",
         }
     )
 
@@ -136,11 +141,17 @@ class ControllerParams:
     passivity: PassivityParams = field(default_factory=PassivityParams)
     hold: HoldParams = field(default_factory=HoldParams)  # hold-on-release
     follow: FollowParams = field(default_factory=FollowParams)  # the breath, while steered
+    glide: GlideParams = field(default_factory=GlideParams)  # eq. 10 lighter for a steady push
     use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
     ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
 
     def __post_init__(self) -> None:
+        if self.glide.enabled and self.translation.law != "deadband_linear":
+            raise ConfigError(
+                "glide.enabled: glide works on eq. 10's law; expected translation.law "
+                f"deadband_linear, got {self.translation.law!r}"
+            )
         if self.fixture_normal not in FIXTURE_NORMALS:
             raise ConfigError(
                 f"fixture_normal: expected one of {', '.join(FIXTURE_NORMALS)}, "
@@ -222,6 +233,7 @@ class HandGuidingController:
             self._passivity.params = params.passivity
             self._hold.params = params.hold
             self._follow.params = params.follow
+            self._glide.params = params.glide
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
         tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None
@@ -244,6 +256,7 @@ class HandGuidingController:
         self._passivity = passivity_controller(self.params.passivity)
         self._hold = ContactHold(self.params.hold)
         self._follow = BreathFollower(self.params.follow)
+        self._glide = Glide(self.params.glide)
 
     @property
     def release(self) -> ReleaseDetector:
@@ -260,6 +273,11 @@ class HandGuidingController:
     def follow(self) -> BreathFollower:
         """Following the breath while the hand steers, and its state (level, blend)."""
         return self._follow
+
+    @property
+    def glide(self) -> Glide:
+        """Glide's state (the moving deadband, the low-passed command)."""
+        return self._glide
 
     @property
     def hold(self) -> ContactHold:
@@ -291,6 +309,7 @@ class HandGuidingController:
             self._passivity.reset()
             self._hold.stop()
             self._follow.stop()
+            self._glide.reset()
             return {
                 "twist_B": np.zeros(6),
                 "twist_law_B": np.zeros(6),
@@ -321,6 +340,9 @@ class HandGuidingController:
                 v = apply_law(F, p.translation)
                 w = apply_law(tau, p.rotation)
                 twist_law = np.concatenate([v, w])
+        if p.glide.enabled:
+            v = self._glide.step(dt, F, p.translation.slope, p.translation.deadband)
+            twist_law = np.concatenate([v, w])
 
         hold = self._hold
         holding = hold.active
@@ -392,6 +414,8 @@ class HandGuidingController:
                     holding = False
                     status |= _RELEASED
 
+        if braking or holding:
+            self._glide.reset()
         if p.passivity.enabled:
             v, acted = self._passivity.step(
                 t, F, inputs["p_BT_B"], v, control=not braking and not holding

@@ -1,0 +1,129 @@
+"""Glide: eq. 10 lighter for a steady push than for a quick one (the law's part, per base axis).
+
+Eq. 10 (seed 000, 3.F.1) is one slope α for every frequency of the hand's force: ẋ = α (|F̃| - η)
+sgn F̃. Its two costs pull its gains in opposite directions (docs/decisions.md, "The scan's
+effort"): the hand pays η + v / α to move the probe at v (1.75 N at 1 cm/s with the seed's gains,
+against a scan's freehand 3-4 N), and the image pays α for every newton of F̃ above 2 Hz (the
+admittance integrates it, α/s: tremor, sensor noise, the loop with the contact). A lighter law
+saves the hand and shakes the image; a heavier one steadies the image and tires the hand. Glide
+splits them by frequency, and the deadband by whether the probe already moves:
+
+    η_i     the deadband on axis i: eq. 10's η_i at rest; once the push beyond it moves the probe,
+            it approaches `moving_deadband` over `settle_s` while the push keeps its sign and
+            stays beyond it; back to η_i (at once) as soon as the push falls inside or turns.
+            Static and kinetic friction: breaking away asks for η, keeping going for less, so
+            the hand at rest on the handle (tremor, noise, the sensors' errors) still moves nothing
+    u_i     = α_i (|F̃_i| - η_i)⁺ sgn F̃_i                (eq. 10 with that deadband)
+    ū_i     u_i low-passed at `corner_hz`; while u_i = 0 it decays over `release_s` instead
+    ẋ_i     = u_i + (r_i - 1) ū_i                        (r_i = `low_slope_ratio`)
+
+For a push held beyond the deadband the slope is r α (light: 3.2 α = 0.04 m/(s·N) by default
+across the base's z axis); above the corner it falls back to α, so the image's band (2 Hz and up)
+meets nearly eq. 10's own slope. Without the deadband u + (r - 1) ū is the lag network
+α (r + τ s) / (1 + τ s), τ = 1 / (2π f_c): r α for a steady push, |α (r + j f / f_c) / (1 + j f /
+f_c)| above (1.24 α at 2 Hz for r = 3.2 and f_c = 0.5 Hz, 1.07 α at 4 Hz). Its real part,
+α (r + (f / f_c)²) / (1 + (f / f_c)²), is positive at every frequency: as an admittance it is
+passive, storing the low-passed part of the motion and giving back no more than it stored. The
+deadband before it only ever passes less of F̃ on (u has F̃'s sign and at most its size times α);
+the passivity controller (`hoh_cosim.control.passivity`, if on) watches the whole command.
+
+Why the moving deadband as well: the hand pays η_i at any slope, and η = 0.95 N alone is a quarter
+of a scan's freehand force; the 75 % effort target leaves the hand 0.9-1.0 N in all. At rest the
+deadband stays eq. 10's, so a view or a press, where the hand sits on the handle, sees the seed's
+law. Along the probe (z) the defaults leave eq. 10 as it is (r = 1, the moving deadband the
+default η_z): a lighter law along the probe speeds up the hand's press loop, which its reaction
+delay leaves little phase for (docs/decisions.md).
+
+After a release the low-passed part decays over `release_s` (50 ms), not the corner's 0.32 s: at a
+steady 1 cm/s it carries the tip 0.34 mm further than eq. 10 would, against the 1 m/s² limit's
+own 0.05 mm (the supervisor's acceleration clamp comes after; at 6 cm/s, 2 mm against its 2 mm).
+Reset whenever the controller stops, brakes after a release or holds. Only with eq. 10's law
+(`translation.law` deadband_linear). Off by default (docs/decisions.md, "Glide").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hoh_cosim.control.vectors import Vec3, as_nonnegative_vector, as_scalar, frozen
+from hoh_cosim.errors import ConfigError
+
+__all__ = ["Glide", "GlideParams"]
+
+
+@dataclass(frozen=True)
+class GlideParams:
+    """Glide's lag and moving deadband (module docstring), per base axis where a vector."""
+
+    UNITS: ClassVar[dict[str, Any]] = {
+        "low_slope_ratio": "1",
+        "corner_hz": "Hz",
+        "moving_deadband": "N",
+        "settle_s": "s",
+        "release_s": "s",
+    }
+
+    enabled: bool = False
+    # r: the slope a steady push meets, in multiples of eq. 10's α (1: the lag does nothing)
+    low_slope_ratio: Vec3 = field(default_factory=lambda: frozen([3.2, 3.2, 1.0]))
+    corner_hz: float = 0.5  # f_c: above it the slope falls back to α
+    # [N] the deadband once the probe moves (the smaller of this and eq. 10's η per axis)
+    moving_deadband: Vec3 = field(default_factory=lambda: frozen([0.3, 0.3, 0.25]))
+    settle_s: float = 0.5  # [s] the deadband's approach to moving_deadband while the push lasts
+    release_s: float = 0.05  # [s] the low-passed part's decay once eq. 10 commands nothing
+
+    def __post_init__(self) -> None:
+        ratio = as_nonnegative_vector(self.low_slope_ratio, 3, "low_slope_ratio")
+        if np.any(ratio < 1.0):
+            raise ConfigError(f"low_slope_ratio must be >= 1 on every axis, got {ratio.tolist()}")
+        object.__setattr__(self, "low_slope_ratio", frozen(ratio))
+        object.__setattr__(
+            self,
+            "moving_deadband",
+            frozen(as_nonnegative_vector(self.moving_deadband, 3, "moving_deadband")),
+        )
+        for name in ("corner_hz", "settle_s", "release_s"):
+            object.__setattr__(
+                self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
+            )
+
+
+class Glide:
+    """Glide of the module docstring, one controller tick at a time."""
+
+    def __init__(self, params: GlideParams | None = None) -> None:
+        self.params = params or GlideParams()
+        self.reset()
+
+    def reset(self) -> None:
+        self.moving = np.zeros(3)  # the sign of the push that moves the probe, per axis; 0: at rest
+        self.deadband = np.full(3, np.nan)  # η_i while moving
+        self.slow = np.zeros(3)  # ū
+
+    @property
+    def active(self) -> bool:
+        """Whether the probe moves on any axis under a deadband below eq. 10's."""
+        return bool(self.moving.any())
+
+    def step(self, dt: float, F: Vec3, slope: Vec3, deadband: Vec3) -> Vec3:
+        """The translation command for the compensated hand force `F` under eq. 10's `slope` and
+        `deadband` (the translation law's gains)."""
+        p = self.params
+        F = np.asarray(F, dtype=np.float64)
+        size = np.abs(F)
+        sign = np.sign(F)
+        low = np.minimum(p.moving_deadband, deadband)
+        going = (self.moving != 0.0) & (sign == self.moving) & (size > self.deadband)
+        settle = 1.0 - math.exp(-dt / p.settle_s)
+        self.deadband = np.where(going, self.deadband + (low - self.deadband) * settle, deadband)
+        starting = ~going & (size > deadband)
+        self.moving = np.where(going, self.moving, np.where(starting, sign, 0.0))
+        u = sign * slope * np.maximum(size - self.deadband, 0.0)
+        follow = 1.0 - math.exp(-2.0 * math.pi * p.corner_hz * dt)
+        decay = math.exp(-dt / p.release_s)
+        self.slow = np.where(u == 0.0, self.slow * decay, self.slow + (u - self.slow) * follow)
+        return u + (p.low_slope_ratio - 1.0) * self.slow

@@ -1,0 +1,175 @@
+"""Glide: eq. 10 lighter for a steady push than for a quick one, with a smaller deadband once the
+probe moves. The block's gains against the lag network's, its deadbands at rest and in motion, what
+it leaves after a release, and the controller around it (off by default, reset when braking, eq. 10
+only)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hoh_cosim.control.admittance import AdmittanceGains
+from hoh_cosim.control.controller import ControllerParams, HandGuidingController
+from hoh_cosim.control.glide import Glide, GlideParams
+from hoh_cosim.control.release import ReleaseParams
+from hoh_cosim.control.supervisor import Status
+from hoh_cosim.errors import ConfigError
+from tests.estimates import controller_inputs
+
+DT = 2e-3
+SLOPE = np.full(3, 0.0125)  # eq. 10's α, the seed's
+DEADBAND = np.array([0.95, 0.95, 0.25])  # eq. 10's η, the seed's
+
+
+def drive(glide: Glide, forces: np.ndarray) -> np.ndarray:
+    """The command for each row of `forces` (one per tick)."""
+    return np.array([glide.step(DT, F, SLOPE, DEADBAND) for F in forces])
+
+
+def along_x(values) -> np.ndarray:
+    out = np.zeros((len(values), 3))
+    out[:, 0] = values
+    return out
+
+
+def test_a_steady_push_meets_the_light_slope_beyond_the_moving_deadband():
+    # 1.5 N held for 6 s: the deadband settles to 0.3 N (0.5 s), the lag to r α (0.32 s)
+    v = drive(Glide(GlideParams(enabled=True)), along_x(np.full(round(6.0 / DT), 1.5)))
+    assert v[-1, 0] == pytest.approx(3.2 * 0.0125 * (1.5 - 0.3), rel=1e-3)
+    assert np.all(v[:, 1:] == 0.0)
+    # the first tick is eq. 10's (and the lag's first step of it): breaking away costs the seed's η
+    follow = 1.0 - math.exp(-2.0 * math.pi * 0.5 * DT)
+    assert v[0, 0] == pytest.approx(0.0125 * (1.5 - 0.95) * (1.0 + 2.2 * follow), rel=1e-9)
+    # and the command only grows while the push holds (no overshoot to unwind)
+    assert np.all(np.diff(v[:, 0]) >= -1e-15)
+
+
+@pytest.mark.parametrize("f_hz", [2.0, 4.0])
+def test_a_quick_force_meets_the_lag_networks_gain_near_eq_10s_slope(f_hz):
+    # 0.2 N at f on a steady 1.5 N push: the command's swing at f is the lag network's
+    # |α (r + j f / f_c) / (1 + j f / f_c)| of it (1.24 α at 2 Hz, 1.07 α at 4 Hz), not r α
+    t = np.arange(round(12.0 / DT)) * DT
+    v = drive(Glide(GlideParams(enabled=True)), along_x(1.5 + 0.2 * np.sin(2 * np.pi * f_hz * t)))
+    late = t >= 6.0
+    swing = 2.0 * np.sqrt(2.0) * np.std(v[late, 0] - v[late, 0].mean()) / 2.0  # amplitude
+    x = f_hz / 0.5
+    gain = 0.0125 * abs(complex(3.2, x) / complex(1.0, x))
+    assert swing == pytest.approx(gain * 0.2, rel=0.03)
+    assert gain < 1.25 * 0.0125 < 3.2 * 0.0125
+
+
+def test_at_rest_the_seeds_deadband_holds_and_in_motion_the_moving_one():
+    glide = Glide(GlideParams(enabled=True))
+    # a hand resting on the handle at 0.9 N (tremor, a sensor's error) moves nothing
+    assert np.all(drive(glide, along_x(np.full(round(3.0 / DT), 0.9))) == 0.0)
+    # a push of 1.2 N breaks away; eased to 0.5 N after 1 s it keeps the probe going (eq. 10
+    # would stop at once), and at 0.25 N, inside the moving deadband, it stops
+    moving = drive(glide, along_x(np.r_[np.full(500, 1.2), np.full(500, 0.5)]))
+    # (the deadband 2 s into its 0.5 s approach: 0.3 N and 1.8 % of the way from 0.95)
+    assert moving[-1, 0] == pytest.approx(3.2 * 0.0125 * (0.5 - 0.3), rel=0.05)
+    assert glide.active
+    stopped = drive(glide, along_x(np.full(200, 0.25)))
+    assert not glide.active
+    # the law's own part stops at once; the low-passed part decays over release_s (50 ms)
+    assert stopped[25, 0] < 0.4 * moving[-1, 0]
+    assert abs(stopped[-1, 0]) < 1e-3 * moving[-1, 0]
+    # back at rest the seed's deadband is back: 0.9 N adds nothing to the residual's decay
+    rest = drive(glide, along_x(np.full(200, 0.9)))
+    assert np.all((rest[:, 0] >= 0.0) & (rest[:, 0] <= stopped[-1, 0]))
+    assert np.all(np.diff(rest[:, 0]) <= 0.0)
+
+
+def test_a_push_that_turns_breaks_away_again():
+    glide = Glide(GlideParams(enabled=True))
+    drive(glide, along_x(np.full(1000, 1.5)))
+    # -0.6 N: beyond the moving deadband but the other way, and inside the seed's: no motion
+    # back (after the forward part's decay)
+    back = drive(glide, along_x(np.full(200, -0.6)))
+    assert np.all(back[:, 0] >= 0.0)
+    assert abs(back[-1, 0]) < 1e-3 * 3.2 * 0.0125 * 1.2
+    # -1.1 N breaks away the other way, at eq. 10's deadband first
+    turned = drive(glide, along_x(np.full(1, -1.1)))
+    assert turned[0, 0] == pytest.approx(-0.0125 * (1.1 - 0.95), rel=0.02)
+
+
+def test_the_travel_after_a_release_is_bounded_by_the_release_decay():
+    # a steady push at 1 cm/s, then the hand lets go: the tip goes on by the low-passed part's
+    # (r - 1) v / r · release_s = 0.34 mm at most (eq. 10 would stop at once)
+    force = 0.3 + 0.01 / (3.2 * 0.0125)
+    # it breaks away first, and the deadband comes down under the push
+    push = np.r_[np.full(750, 1.5), np.full(round(5.0 / DT), force)]
+    glide = Glide(GlideParams(enabled=True))
+    v = drive(glide, along_x(push))
+    assert v[-1, 0] == pytest.approx(0.01, rel=1e-3)
+    after = drive(glide, along_x(np.zeros(round(1.0 / DT))))
+    travel = float(np.sum(after[:, 0]) * DT)
+    assert 0.0 < travel <= 2.2 / 3.2 * 0.01 * 0.05 * 1.01
+    # a longer release_s carries it further, in proportion
+    slow = Glide(GlideParams(enabled=True, release_s=0.15))
+    drive(slow, along_x(push))
+    slow_travel = float(np.sum(drive(slow, along_x(np.zeros(round(1.0 / DT))))[:, 0]) * DT)
+    assert slow_travel == pytest.approx(3.0 * travel, rel=0.05)
+
+
+def test_with_no_lag_and_no_moving_deadband_it_is_eq_10():
+    rng = np.random.default_rng(23)
+    forces = rng.normal(0.0, 1.5, size=(2000, 3))
+    forces[:, 0] += np.linspace(-2.0, 2.0, 2000)
+    params = GlideParams(enabled=True, low_slope_ratio=[1, 1, 1], moving_deadband=DEADBAND)
+    v = drive(Glide(params), forces)
+    eq10 = np.sign(forces) * SLOPE * np.maximum(np.abs(forces) - DEADBAND, 0.0)
+    np.testing.assert_allclose(v, eq10, rtol=0.0, atol=1e-15)
+
+
+def _hand(F_x: float) -> dict:
+    return controller_inputs(F_hand_B=[F_x, 0.0, 0.0], F_hand_meas_B=[F_x, 0.0, 0.0])
+
+
+def test_the_controller_glides_only_when_asked():
+    def command(ctl: HandGuidingController, seconds: float, F_x: float) -> float:
+        for k in range(round(seconds / DT)):
+            out = ctl.step(k * DT, DT, _hand(F_x))
+        return float(out["twist_law_B"][0])
+
+    assert ControllerParams().glide.enabled is False
+    assert command(HandGuidingController(), 3.0, 1.5) == pytest.approx(0.0125 * 0.55)
+    gliding = HandGuidingController(ControllerParams(glide=GlideParams(enabled=True)))
+    assert command(gliding, 3.0, 1.5) == pytest.approx(3.2 * 0.0125 * 1.2, rel=0.01)
+    assert gliding.glide.active
+
+
+def test_the_controller_forgets_the_glide_while_it_brakes_after_a_release():
+    ctl = HandGuidingController(
+        ControllerParams(glide=GlideParams(enabled=True), release=ReleaseParams(enabled=True))
+    )
+    t = 0.0
+    for _ in range(round(3.0 / DT)):
+        ctl.step(t, DT, _hand(1.5))
+        t += DT
+    assert ctl.glide.active
+    released = False
+    for _ in range(round(0.5 / DT)):
+        out = ctl.step(t, DT, _hand(0.0))
+        t += DT
+        released |= bool(int(out["status"][0]) & int(Status.RELEASED))
+    assert released
+    assert not ctl.glide.active
+    assert np.all(ctl.glide.slow == 0.0)
+
+
+def test_glide_refuses_a_law_other_than_eq_10_and_bad_parameters():
+    with pytest.raises(
+        ConfigError, match=r"expected translation\.law deadband_linear, got 'sigmoid'"
+    ):
+        ControllerParams(
+            glide=GlideParams(enabled=True), translation=AdmittanceGains(law="sigmoid")
+        )
+    with pytest.raises(ConfigError, match="low_slope_ratio must be >= 1"):
+        GlideParams(low_slope_ratio=[0.5, 1.0, 1.0])
+    with pytest.raises(ConfigError, match="corner_hz"):
+        GlideParams(corner_hz=0.0)
+    with pytest.raises(ConfigError, match="moving_deadband"):
+        GlideParams(moving_deadband=[-0.1, 0.3, 0.25])
+    assert math.isfinite(GlideParams().release_s)
