@@ -278,6 +278,11 @@ FOLLOW_BREATH = (*PROBE_CHECK, "controller.follow.enabled=true")
 (`hoh_cosim.control.follow`): in contact, the axial contact force's departure from its level over
 about a breath moves the probe along its axis, so the hand no longer steers it up and down with
 every breath (docs/decisions.md, "Following the breath while the hand steers")."""
+GLIDE = (*FOLLOW_BREATH, "controller.glide.enabled=true")
+"""The follow mode with glide (`hoh_cosim.control.glide`): eq. 10 light for a steady push (3.2
+times the slope under 0.5 Hz across the probe, the seed's above), and a 0.3 N deadband across the
+probe once it moves, so that the hand steering a scan pays less than the seed's 0.95 N and the
+image meets the seed's slope (docs/decisions.md, "Glide")."""
 
 
 @dataclass(frozen=True)
@@ -339,6 +344,12 @@ MODES: dict[str, Mode] = {
             "assisted, following the breath after a probe check",
             "clinical_assisted.yaml",
             FOLLOW_BREATH,
+        ),
+        Mode(
+            "glide",
+            "assisted, gliding and following the breath after a probe check",
+            "clinical_assisted.yaml",
+            GLIDE,
         ),
     )
 }
@@ -860,6 +871,7 @@ _COLOURS = {
     "transparency": "tab:orange",
     HOLD: "tab:purple",
     "follow": "tab:cyan",
+    "glide": "tab:olive",
 }
 
 
