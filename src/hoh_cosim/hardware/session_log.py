@@ -59,7 +59,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hoh_cosim import __version__
-from hoh_cosim.control.frames import matrix_to_rotvec, rotvec_to_matrix
 from hoh_cosim.errors import InputFileError, RunError
 
 if TYPE_CHECKING:  # the writer process imports this module: it needs none of them
@@ -240,10 +239,12 @@ class CycleRecord:
         reading, verdict = self.cycle.reading, self.cycle.verdict
         row.start(self.k, self.t, ft is not None, probe is not None)
         row.set("/robot.p_BT_B", state.p_BT_B)
-        row.set(
-            "/robot.rotvec_BT",
-            state.rotvec_BT if state.rotvec_BT is not None else matrix_to_rotvec(state.R_BT),
-        )
+        rotvec = state.rotvec_BT
+        if rotvec is None:
+            from hoh_cosim.control.frames import matrix_to_rotvec  # see at_log_resolution
+
+            rotvec = matrix_to_rotvec(state.R_BT)
+        row.set("/robot.rotvec_BT", rotvec)
         row.set("/robot.twist_B", state.twist_B)
         row.set("/robot.robot_mode", state.robot_mode)
         row.set("/robot.safety_mode", state.safety_mode)
@@ -380,6 +381,10 @@ def at_log_resolution(state: RobotState) -> RobotState:
     orientation through its rotation vector at its decimals (the robot's own where it gives one:
     converting a matrix costs 50 µs). The loop works with this state, so that a replay of the log
     feeds the blocks exactly what the session fed them."""
+    # here, not at the module's top: the log's writer process imports this module, and scipy's
+    # rotations (0.2 s of imports) would hold up every session's start for it
+    from hoh_cosim.control.frames import matrix_to_rotvec, rotvec_to_matrix
+
     p_decimals = int(RESOLUTION["/robot", "p_BT_B"])
     r_decimals = int(RESOLUTION["/robot", "rotvec_BT"])
     rotvec = state.rotvec_BT if state.rotvec_BT is not None else matrix_to_rotvec(state.R_BT)
