@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from hoh_cosim.calibration import read_calibration
 from hoh_cosim.cli import main
 from hoh_cosim.control.supervisor import Status
 from hoh_cosim.cosim.engines import simulate
+from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.scenario import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
@@ -348,30 +350,36 @@ def test_hold_on_release_keeps_the_breathing_contact_and_hands_back():
     assert np.std(pressing[hands_off]) > 1.0
 
 
-def test_the_controller_fmu_glides_on_a_scan_with_less_of_the_hands_force():
-    """The clinical rig's scan at 8 N on an abdomen breathing 8 mm deep, the controller an FMU
-    stepped by fmpy with `glide.enabled` set through its parameters: the hand steers the same line
-    with less force than under eq. 10 alone in process (1.63 against 2.25 N RMS), closer to it,
-    and the image no less steady."""
+BREATHING_SCAN = (
+    "operator.task=scan",
+    "operator.target_force_N=8",
+    "operator.length_m=0.1",
+    "operator.period_s=20",
+    "operator.direction_B=[1,0,0]",
+    "breathing.amplitude_m=0.008",
+)
+"""The clinical rig's 10 cm scan at 8 N on an abdomen breathing 8 mm deep."""
+
+
+@functools.cache
+def breathing_scan(engine: str, *overrides: str) -> tuple[Recording, dict]:
+    """16 s of `BREATHING_SCAN` with `overrides`: the recording and the metrics (each run once per
+    process: the in-process run without overrides is the tests' common reference)."""
     from hoh_cosim.cosim.report import compute_report
 
-    scan = (
-        "operator.task=scan",
-        "operator.target_force_N=8",
-        "operator.length_m=0.1",
-        "operator.period_s=20",
-        "operator.direction_B=[1,0,0]",
-        "breathing.amplitude_m=0.008",
+    scenario = load_scenario(
+        SCENARIOS / "clinical_assisted.yaml", (*BREATHING_SCAN, *overrides), duration_s=16.0
     )
+    rec = simulate(scenario, engine, progress=False)
+    return rec, compute_report(scenario, rec).metrics
 
-    def run(engine: str, *overrides: str) -> dict:
-        scenario = load_scenario(
-            SCENARIOS / "clinical_assisted.yaml", (*scan, *overrides), duration_s=16.0
-        )
-        return compute_report(scenario, simulate(scenario, engine, progress=False)).metrics
 
-    m = run("fmu", "controller.glide.enabled=true")
-    m_off = run("inprocess")
+def test_the_controller_fmu_glides_on_a_scan_with_less_of_the_hands_force():
+    """`BREATHING_SCAN`, the controller an FMU stepped by fmpy with `glide.enabled` set through
+    its parameters: the hand steers the same line with less force than under eq. 10 alone in
+    process (1.63 against 2.25 N RMS), closer to it, and the image no less steady."""
+    _, m = breathing_scan("fmu", "controller.glide.enabled=true")
+    _, m_off = breathing_scan("inprocess")
     assert m["hand_force_rms_N"] < 0.85 * m_off["hand_force_rms_N"]
     assert m["path_rms_error_m"] < m_off["path_rms_error_m"]
     # the lag keeps eq. 10's slope above its corner: the jitter about the same (21.3 against 21.7
@@ -381,30 +389,11 @@ def test_the_controller_fmu_glides_on_a_scan_with_less_of_the_hands_force():
 
 
 def test_the_controller_fmu_follows_the_breath_on_a_scan():
-    """The clinical rig's 10 cm scan at 8 N on an abdomen breathing 8 mm deep, the controller an FMU
-    stepped by fmpy with `follow.enabled` set through its parameters: the robot follows the breath
-    (FOLLOWING in the status) and the contact force swings far less than with the same scan in
-    process and no follow, about the same level."""
-    from hoh_cosim.cosim.report import compute_report
-
-    scan = (
-        "operator.task=scan",
-        "operator.target_force_N=8",
-        "operator.length_m=0.1",
-        "operator.period_s=20",
-        "operator.direction_B=[1,0,0]",
-        "breathing.amplitude_m=0.008",
-    )
-
-    def run(engine: str, *overrides: str):
-        scenario = load_scenario(
-            SCENARIOS / "clinical_assisted.yaml", (*scan, *overrides), duration_s=16.0
-        )
-        rec = simulate(scenario, engine, progress=False)
-        return rec, compute_report(scenario, rec).metrics
-
-    rec, m = run("fmu", "controller.follow.enabled=true")
-    _, m_off = run("inprocess")
+    """`BREATHING_SCAN`, the controller an FMU stepped by fmpy with `follow.enabled` set through
+    its parameters: the robot follows the breath (FOLLOWING in the status) and the contact force
+    swings far less than with the same scan in process and no follow, about the same level."""
+    rec, m = breathing_scan("fmu", "controller.follow.enabled=true")
+    _, m_off = breathing_scan("inprocess")
     status = rec["controller.status"][:, 0].astype(int)
     in_contact = rec["plant.F_contact_B"][:, 2] > 3.0  # the phantom pushes the probe up
     assert np.mean((status[in_contact] & int(Status.FOLLOWING)) != 0) > 0.9
