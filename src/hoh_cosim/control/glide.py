@@ -18,7 +18,7 @@ splits them by frequency, and the deadband by whether the probe already moves:
     ẋ_i     = u_i + (r_i - 1) ū_i                        (r_i = `low_slope_ratio`)
 
 For a push held beyond the deadband the slope is r α (light: 3.2 α = 0.04 m/(s·N) by default
-across the base's z axis); above the corner it falls back to α, so the image's band (2 Hz and up)
+on the base's x and y); above the corner it falls back to α, so the image's band (2 Hz and up)
 meets nearly eq. 10's own slope. Without the deadband u + (r - 1) ū is the lag network
 α (r + τ s) / (1 + τ s), τ = 1 / (2π f_c): r α for a steady push, |α (r + j f / f_c) / (1 + j f /
 f_c)| above (1.24 α at 2 Hz for r = 3.2 and f_c = 0.5 Hz, 1.07 α at 4 Hz). Its real part,

@@ -280,9 +280,9 @@ about a breath moves the probe along its axis, so the hand no longer steers it u
 every breath (docs/decisions.md, "Following the breath while the hand steers")."""
 GLIDE = (*FOLLOW_BREATH, "controller.glide.enabled=true")
 """The follow mode with glide (`hoh_cosim.control.glide`): eq. 10 light for a steady push (3.2
-times the slope under 0.5 Hz across the probe, the seed's above), and a 0.3 N deadband across the
-probe once it moves, so that the hand steering a scan pays less than the seed's 0.95 N and the
-image meets the seed's slope (docs/decisions.md, "Glide")."""
+times the slope under 0.5 Hz on the base's x and y, across the upright probe; the seed's slope
+above), and a 0.3 N deadband there once the probe moves, so that the hand steering a scan pays less
+than the seed's 0.95 N and the image meets the seed's slope (docs/decisions.md, "Glide")."""
 
 
 @dataclass(frozen=True)
