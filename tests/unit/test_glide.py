@@ -106,6 +106,9 @@ def test_the_travel_after_a_release_is_bounded_by_the_release_decay():
     after = drive(glide, along_x(np.zeros(round(1.0 / DT))))
     travel = float(np.sum(after[:, 0]) * DT)
     assert 0.0 < travel <= 2.2 / 3.2 * 0.01 * 0.05 * 1.01
+    # and it ends: the law asks for nothing at all within 0.5 s (the release detector reads that)
+    assert np.all(after[round(0.5 / DT) :] == 0.0)
+    assert np.all(glide.slow == 0.0)
     # a longer release_s carries it further, in proportion
     slow = Glide(GlideParams(enabled=True, release_s=0.15))
     drive(slow, along_x(push))
@@ -138,6 +141,11 @@ def test_the_controller_glides_only_when_asked():
     gliding = HandGuidingController(ControllerParams(glide=GlideParams(enabled=True)))
     assert command(gliding, 3.0, 1.5) == pytest.approx(3.2 * 0.0125 * 1.2, rel=0.01)
     assert gliding.glide.active
+    # switched off mid-session (a scenario's event, a retune): eq. 10 at once, nothing kept
+    gliding.retune(ControllerParams())
+    assert not gliding.glide.active
+    assert np.all(gliding.glide.slow == 0.0)
+    assert command(gliding, 0.1, 1.5) == pytest.approx(0.0125 * 0.55)
 
 
 def test_the_controller_forgets_the_glide_while_it_brakes_after_a_release():

@@ -234,6 +234,8 @@ class HandGuidingController:
             self._hold.params = params.hold
             self._follow.params = params.follow
             self._glide.params = params.glide
+            if not params.glide.enabled:  # switched off: nothing of it left for a later switch on
+                self._glide.reset()
         # Both laws elementwise and of one kind: run them as one 6-vector law (half the work).
         tr, rot = params.translation, params.rotation
         self._law6: AdmittanceGains | None = None

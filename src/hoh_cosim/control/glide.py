@@ -36,7 +36,8 @@ delay leaves little phase for (docs/decisions.md).
 
 After a release the low-passed part decays over `release_s` (50 ms), not the corner's 0.32 s: at a
 steady 1 cm/s it carries the tip 0.34 mm further than eq. 10 would, against the 1 m/s² limit's
-own 0.05 mm (the supervisor's acceleration clamp comes after; at 6 cm/s, 2 mm against its 2 mm).
+own 0.05 mm (the supervisor's acceleration clamp comes after; at 6 cm/s, 2 mm against its 2 mm),
+and is zero once under 1 µm/s (0.4 s after a 1 cm/s push): the law at rest asks for nothing.
 Reset whenever the controller stops, brakes after a release or holds. Only with eq. 10's law
 (`translation.law` deadband_linear). Off by default (docs/decisions.md, "Glide").
 """
@@ -53,6 +54,11 @@ from hoh_cosim.control.vectors import Vec3, as_nonnegative_vector, as_scalar, fr
 from hoh_cosim.errors import ConfigError
 
 __all__ = ["Glide", "GlideParams"]
+
+_REST = 1e-6
+"""[m/s] The low-passed part's decay ends here, at rest: an exponential never reaches zero, and a law
+that still asked for a nanometre a second would keep the release detector guiding (it reads
+whether the law asks for motion) long after the hand let go."""
 
 
 @dataclass(frozen=True)
@@ -125,5 +131,7 @@ class Glide:
         u = sign * slope * np.maximum(size - self.deadband, 0.0)
         follow = 1.0 - math.exp(-2.0 * math.pi * p.corner_hz * dt)
         decay = math.exp(-dt / p.release_s)
-        self.slow = np.where(u == 0.0, self.slow * decay, self.slow + (u - self.slow) * follow)
+        fading = self.slow * decay
+        fading[np.abs(fading) < _REST] = 0.0
+        self.slow = np.where(u == 0.0, fading, self.slow + (u - self.slow) * follow)
         return u + (p.low_slope_ratio - 1.0) * self.slow
