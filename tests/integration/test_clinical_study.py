@@ -199,7 +199,7 @@ def test_the_follow_mode_takes_the_breath_out_of_the_contact(study) -> None:
 def test_the_glide_mode_spares_the_hand_on_the_scan_and_keeps_the_image(study) -> None:
     """Glide on the follow mode: on every operator's scan the hand pushes less than with the follow
     alone (the full study: 66-79 % less than freehand against 49-60 %), the image is no less
-    steady than eq. 10's within a bound (22.4 against 21.7 µm on average), and the breath is still
+    steady than eq. 10's within a bound (22.3 against 21.7 µm on average), and the breath is still
     followed."""
     assert set(MODES["follow"].overrides) < set(MODES["glide"].overrides)
     assert "controller.glide.enabled=true" in MODES["glide"].overrides
