@@ -163,6 +163,8 @@ def test_a_campaign_injects_its_faults_and_keeps_every_invariant(tmp_path):
     # test_rehearsal.py, which asserts their causes word for word; over every kind (15 runs) this
     # test took 97 s of the suite's 6 minutes, 8 of them about 50.
     assert set(campaign.KINDS) > IN_REHEARSALS
+    rehearsals = (Path(__file__).parent / "test_rehearsal.py").read_text()
+    assert all(f'"{kind}"' in rehearsals for kind in IN_REHEARSALS)  # still injected there
     out = tmp_path / "campaign"
     kinds = ONLY_HERE
     runs = len(kinds)
