@@ -50,7 +50,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hoh_cosim.control.vectors import Vec3, as_nonnegative_vector, as_scalar, frozen
+from hoh_cosim.control.admittance import deadband_linear
+from hoh_cosim.control.vectors import Vec3, as_nonnegative_vector, as_scalar, as_vector, frozen
 from hoh_cosim.errors import ConfigError
 
 __all__ = ["Glide", "GlideParams"]
@@ -83,14 +84,14 @@ class GlideParams:
     release_s: float = 0.05  # [s] the low-passed part's decay once eq. 10 commands nothing
 
     def __post_init__(self) -> None:
-        ratio = as_nonnegative_vector(self.low_slope_ratio, 3, "low_slope_ratio")
+        ratio = as_vector(self.low_slope_ratio, 3, "low_slope_ratio")
         if np.any(ratio < 1.0):
             raise ConfigError(f"low_slope_ratio must be >= 1 on every axis, got {ratio.tolist()}")
-        object.__setattr__(self, "low_slope_ratio", frozen(ratio))
+        object.__setattr__(self, "low_slope_ratio", ratio)
         object.__setattr__(
             self,
             "moving_deadband",
-            frozen(as_nonnegative_vector(self.moving_deadband, 3, "moving_deadband")),
+            as_nonnegative_vector(self.moving_deadband, 3, "moving_deadband"),
         )
         for name in ("corner_hz", "settle_s", "release_s"):
             object.__setattr__(
@@ -128,7 +129,7 @@ class Glide:
         self.deadband = np.where(going, self.deadband + (low - self.deadband) * settle, deadband)
         starting = ~going & (size > deadband)
         self.moving = np.where(going, self.moving, np.where(starting, sign, 0.0))
-        u = sign * slope * np.maximum(size - self.deadband, 0.0)
+        u = deadband_linear(F, slope, self.deadband)
         follow = 1.0 - math.exp(-2.0 * math.pi * p.corner_hz * dt)
         decay = math.exp(-dt / p.release_s)
         fading = self.slow * decay
