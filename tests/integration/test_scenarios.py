@@ -377,14 +377,15 @@ def breathing_scan(engine: str, *overrides: str) -> tuple[Recording, dict]:
 def test_the_controller_fmu_glides_on_a_scan_with_less_of_the_hands_force():
     """`BREATHING_SCAN`, the controller an FMU stepped by fmpy with `glide.enabled` set through
     its parameters: the hand steers the same line with less force than under eq. 10 alone in
-    process (1.62 against 2.25 N RMS), closer to it, and the image no less steady."""
+    process (1.63 against 2.25 N RMS), closer to it, and the image steadier."""
     _, m = breathing_scan("fmu", "controller.glide.enabled=true")
     _, m_off = breathing_scan("inprocess")
     assert m["hand_force_rms_N"] < 0.85 * m_off["hand_force_rms_N"]
     assert m["path_rms_error_m"] < m_off["path_rms_error_m"]
-    # the lag keeps eq. 10's slope above its corner: the jitter about the same (21.3 against 21.7
-    # µm), where eq. 10 at the light slope throughout doubles it
-    assert m["jitter_image_mm"] < 1.15 * m_off["jitter_image_mm"]
+    # the lag keeps eq. 10's slope above its corner (eq. 10 at the light slope throughout doubles
+    # the jitter), and along the probe in contact a third of it above 1 Hz: 16.1 against 21.7 µm
+    # (21.3 without the quiet part)
+    assert m["jitter_image_mm"] < 0.9 * m_off["jitter_image_mm"]
     assert m["contact_losses"] == m_off["contact_losses"] == 0
 
 

@@ -1,6 +1,7 @@
 """Glide: eq. 10 lighter for a steady push than for a quick one, with a smaller deadband once the
-probe moves. The block's gains against the lag network's, its deadbands at rest and in motion, what
-it leaves after a release, and the controller around it (off by default, reset when braking, eq. 10
+probe moves, and quieter for a quick push along the probe in contact. The block's gains against the
+lag networks', its deadbands at rest and in motion, what it leaves after a release, and the
+controller around it (off by default, reset when braking, in contact by the probe force, eq. 10
 only)."""
 
 from __future__ import annotations
@@ -23,15 +24,25 @@ SLOPE = np.full(3, 0.0125)  # eq. 10's α, the seed's
 DEADBAND = np.array([0.95, 0.95, 0.25])  # eq. 10's η, the seed's
 
 
-def drive(glide: Glide, forces: np.ndarray) -> np.ndarray:
-    """The command for each row of `forces` (one per tick)."""
-    return np.array([glide.step(DT, F, SLOPE, DEADBAND) for F in forces])
+def drive(glide: Glide, forces: np.ndarray, contact_N: float | None = None) -> np.ndarray:
+    """The command for each row of `forces` (one per tick), the probe force along its axis
+    `contact_N` throughout."""
+    return np.array([glide.step(DT, F, SLOPE, DEADBAND, contact_N) for F in forces])
+
+
+def along(axis: int, values) -> np.ndarray:
+    out = np.zeros((len(values), 3))
+    out[:, axis] = values
+    return out
 
 
 def along_x(values) -> np.ndarray:
-    out = np.zeros((len(values), 3))
-    out[:, 0] = values
-    return out
+    return along(0, values)
+
+
+def amplitude(x: np.ndarray) -> float:
+    """The amplitude of a sinusoid from its samples over whole periods."""
+    return float(np.sqrt(2.0) * np.std(x))
 
 
 def test_a_steady_push_meets_the_light_slope_beyond_the_moving_deadband():
@@ -53,7 +64,7 @@ def test_a_quick_force_meets_the_lag_networks_gain_near_eq_10s_slope(f_hz):
     t = np.arange(round(12.0 / DT)) * DT
     v = drive(Glide(GlideParams(enabled=True)), along_x(1.5 + 0.2 * np.sin(2 * np.pi * f_hz * t)))
     late = t >= 6.0
-    swing = 2.0 * np.sqrt(2.0) * np.std(v[late, 0] - v[late, 0].mean()) / 2.0  # amplitude
+    swing = amplitude(v[late, 0])
     x = f_hz / 0.5
     gain = 0.0125 * abs(complex(3.2, x) / complex(1.0, x))
     assert swing == pytest.approx(gain * 0.2, rel=0.03)
@@ -126,6 +137,42 @@ def test_with_no_lag_and_no_moving_deadband_it_is_eq_10():
     np.testing.assert_allclose(v, eq10, rtol=0.0, atol=1e-15)
 
 
+@pytest.mark.parametrize("f_hz", [3.0, 5.0])
+def test_in_contact_a_quick_push_along_the_probe_meets_a_third_of_the_slope(f_hz):
+    # 0.2 N at f on a steady 1.5 N push along z: in contact the command's swing is eq. 10's times
+    # |(1 + j q f / f_q) / (1 + j f / f_q)| (0.45 at 3 Hz, 0.38 at 5 Hz for q = 1/3, f_q = 1 Hz);
+    # out of contact, and on x in contact, it is eq. 10's
+    t = np.arange(round(8.0 / DT)) * DT
+    wave = 1.5 + 0.2 * np.sin(2 * np.pi * f_hz * t)
+    late = t >= 4.0
+    x = f_hz / 1.0
+    quiet = abs(complex(1.0, x / 3.0) / complex(1.0, x))
+    v = drive(Glide(GlideParams(enabled=True)), along(2, wave), contact_N=8.0)
+    assert amplitude(v[late, 2]) == pytest.approx(quiet * 0.0125 * 0.2, rel=0.03)
+    # a steady push meets eq. 10's own slope along the probe (r = 1 there)
+    assert v[late, 2].mean() == pytest.approx(0.0125 * (1.5 - 0.25), rel=1e-3)
+    free = drive(Glide(GlideParams(enabled=True)), along(2, wave), contact_N=2.0)
+    np.testing.assert_allclose(free[:, 2], 0.0125 * (wave - 0.25), rtol=1e-12)
+    across = drive(Glide(GlideParams(enabled=True)), along(0, wave), contact_N=8.0)
+    unsheltered = drive(Glide(GlideParams(enabled=True)), along(0, wave))
+    np.testing.assert_array_equal(across, unsheltered)
+
+
+def test_in_contact_the_quiet_part_delays_the_travel_and_adds_none():
+    # a 1 s push of 1.5 N along the probe, then nothing: the tip travels what eq. 10 would (the
+    # quiet part's gain for a steady push is 1), later by at most 1 / (2π f_q); then it is at rest
+    glide = Glide(GlideParams(enabled=True))
+    push = np.r_[np.full(round(1.0 / DT), 1.5), np.zeros(round(3.0 / DT))]
+    v = drive(glide, along(2, push), contact_N=8.0)
+    eq10 = 0.0125 * (1.5 - 0.25) * 1.0
+    assert float(np.sum(v[:, 2]) * DT) == pytest.approx(eq10, rel=1e-4)
+    assert np.all(v[:, 2] >= 0.0)
+    assert float(np.sum(v[: round(1.0 / DT), 2]) * DT) >= eq10 * (1.0 - 2.0 / 3.0 / (2 * np.pi))
+    # and the law at rest asks for nothing within 2 s of the push's end (the release detector)
+    assert np.all(v[round(3.0 / DT) :] == 0.0)
+    assert np.all(glide.quiet == 0.0)
+
+
 def _hand(F_x: float) -> dict:
     return controller_inputs(F_hand_B=[F_x, 0.0, 0.0], F_hand_meas_B=[F_x, 0.0, 0.0])
 
@@ -146,6 +193,33 @@ def test_the_controller_glides_only_when_asked():
     assert not gliding.glide.active
     assert np.all(gliding.glide.slow == 0.0)
     assert command(gliding, 0.1, 1.5) == pytest.approx(0.0125 * 0.55)
+
+
+def test_the_controller_is_quieter_along_the_probe_only_in_contact():
+    # the hand's force along the probe 1.5 N with 0.2 N at 3 Hz on it, the probe pressed by 8 N
+    # along its axis (handle to tip: down) or touching nothing: F̃ the same either way (the wrist
+    # reads the hand's force and the contact's, eq. 11-12 takes the contact out)
+    def command(contact_N: float) -> np.ndarray:
+        ctl = HandGuidingController(ControllerParams(glide=GlideParams(enabled=True)))
+        F_probe = np.array([0.0, 0.0, contact_N])
+        out = []
+        for k in range(round(6.0 / DT)):
+            push = 1.5 + 0.2 * math.sin(2 * math.pi * 3.0 * k * DT)
+            inputs = controller_inputs(
+                F_hand_B=F_probe + np.array([0.0, 0.0, -push]),
+                F_probe_B=F_probe,
+                probe_axis_B=[0.0, 0.0, -1.0],
+            )
+            out.append(ctl.step(k * DT, DT, inputs)["twist_law_B"][2])
+        return np.array(out[round(3.0 / DT) :])
+
+    quiet = abs(complex(1.0, 1.0) / complex(1.0, 3.0))
+    free, pressed = command(2.0), command(8.0)
+    assert amplitude(free) == pytest.approx(0.0125 * 0.2, rel=0.03)
+    assert amplitude(pressed) == pytest.approx(quiet * 0.0125 * 0.2, rel=0.03)
+    # down, at eq. 10's slope for the steady push either way
+    for v in (free, pressed):
+        assert v.mean() == pytest.approx(-0.0125 * (1.5 - 0.25), rel=1e-3)
 
 
 def test_the_controller_forgets_the_glide_while_it_brakes_after_a_release():
@@ -180,4 +254,9 @@ def test_glide_refuses_a_law_other_than_eq_10_and_bad_parameters():
         GlideParams(corner_hz=0.0)
     with pytest.raises(ConfigError, match="moving_deadband"):
         GlideParams(moving_deadband=[-0.1, 0.3, 0.25])
+    for bad in ([1.0, 1.0, 0.0], [1.5, 1.0, 1.0]):
+        with pytest.raises(ConfigError, match=r"quiet_ratio must be in \(0, 1\] on every axis"):
+            GlideParams(quiet_ratio=bad)
+    with pytest.raises(ConfigError, match="quiet_hz"):
+        GlideParams(quiet_hz=-1.0)
     assert math.isfinite(GlideParams().release_s)

@@ -9,9 +9,10 @@ Per tick:
                τ̃ = τ_hand - p_RT × F_probe (the contact's moment about the torque's reference
                point, `contact_torque`); v = law(F̃) (eq. 10 or an alternative: `variable` adapts
                eq. 10's slope to the hand's intent), ω = law(τ̃)
-    glide      eq. 10 lighter for a steady push than for a quick one, and with a smaller deadband
-               once the probe moves (`hoh_cosim.control.glide`, if on; eq. 10's law only): part
-               of the law, before the release detector reads it
+    glide      eq. 10 lighter for a steady push than for a quick one, with a smaller deadband
+               once the probe moves, and quieter for a quick push along the probe in contact
+               (`hoh_cosim.control.glide`, if on; eq. 10's law only): part of the law, before the
+               release detector reads it
     release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at
                `max_brake_accel`, until the hand pushes again
     hold       hold-on-release (`hoh_cosim.control.hold`, if on): in contact, once the hand let go
@@ -343,7 +344,9 @@ class HandGuidingController:
                 w = apply_law(tau, p.rotation)
                 twist_law = np.concatenate([v, w])
         if p.glide.enabled:
-            v = self._glide.step(dt, F, p.translation.slope, p.translation.deadband)
+            axis = inputs.get("probe_axis_B") if p.use_probe else None
+            c = None if axis is None else -float(F_probe.dot(axis))
+            v = self._glide.step(dt, F, p.translation.slope, p.translation.deadband, c)
             twist_law = np.concatenate([v, w])
 
         hold = self._hold

@@ -30,9 +30,26 @@ the passivity controller (`hoh_cosim.control.passivity`, if on) watches the whol
 Why the moving deadband as well: the hand pays η_i at any slope, and η = 0.95 N alone is a quarter
 of a scan's freehand force; the 75 % effort target leaves the hand 0.9-1.0 N in all. At rest the
 deadband stays eq. 10's, so a view or a press, where the hand sits on the handle, sees the seed's
-law. Along the probe (z) the defaults leave eq. 10 as it is (r = 1, the moving deadband the
+law. Along the probe (z) the defaults leave the light part out (r = 1, the moving deadband the
 default η_z): a lighter law along the probe speeds up the hand's press loop, which its reaction
 delay leaves little phase for (docs/decisions.md).
+
+Along the probe, in contact, glide is quieter instead: the image's jitter is the probe's motion
+along the beam above 2 Hz, which eq. 10 makes of F̃'s content there (the sensors' noise after
+their filters, 0.03-0.04 N each, and the hand's own force; docs/decisions.md, "Where the assisted
+modes' jitter comes from"). While the probe force along its axis exceeds `contact_N`:
+
+    w_i     = u_i + (r_i - 1) ū_i                        (the command above)
+    w̄_i     w_i low-passed at `quiet_hz` (always, in contact or not)
+    ẋ_i     = q_i w_i + (1 - q_i) w̄_i                    (q_i = `quiet_ratio`, at most 1)
+
+the lag network (1 + q τ s) / (1 + τ s) with τ = 1 / (2π f_q) on the law's command: the law's slope
+for a steady push (the same travel for any push, only later, by at most τ = 0.16 s at f_q = 1 Hz),
+q of it well above f_q (0.45 at 3 Hz for q = 1/3). Its price is phase at the hand's press loop's
+crossover, about 2.8 rad/s (`hoh_cosim.study.clinical.FREEHAND_PRESS`): -16° at 1 Hz and q = 1/3.
+Out of contact (the approach, where the touch-down is a step of the contact) the command is w as
+it is. On x and y the default q is 1: there the command is w exactly. Like the low-passed part,
+w̄ is zero once under 1 µm/s while the law commands nothing.
 
 After a release the low-passed part decays over `release_s` (50 ms), not the corner's 0.32 s: at a
 steady 1 cm/s it carries the tip 0.34 mm further than eq. 10 would, against the 1 m/s² limit's
@@ -57,7 +74,7 @@ from hoh_cosim.errors import ConfigError
 __all__ = ["Glide", "GlideParams"]
 
 _REST = 1e-6
-"""[m/s] The low-passed part's decay ends here, at rest: an exponential never reaches zero, and a law
+"""[m/s] The low-passed parts' decay ends here, at rest: an exponential never reaches zero, and a law
 that still asked for a nanometre a second would keep the release detector guiding (it reads
 whether the law asks for motion) long after the hand let go."""
 
@@ -72,6 +89,9 @@ class GlideParams:
         "moving_deadband": "N",
         "settle_s": "s",
         "release_s": "s",
+        "quiet_ratio": "1",
+        "quiet_hz": "Hz",
+        "contact_N": "N",
     }
 
     enabled: bool = False
@@ -82,18 +102,26 @@ class GlideParams:
     moving_deadband: Vec3 = field(default_factory=lambda: frozen([0.3, 0.3, 0.25]))
     settle_s: float = 0.5  # [s] the deadband's approach to moving_deadband while the push lasts
     release_s: float = 0.05  # [s] the low-passed part's decay once eq. 10 commands nothing
+    # q: in contact, the slope a quick push meets, in multiples of a steady push's (1: as it is)
+    quiet_ratio: Vec3 = field(default_factory=lambda: frozen([1.0, 1.0, 1.0 / 3.0]))
+    quiet_hz: float = 1.0  # f_q: above it, in contact, the slope falls to q times
+    contact_N: float = 3.0  # [N] the probe force along its axis above which the probe is in contact
 
     def __post_init__(self) -> None:
         ratio = as_vector(self.low_slope_ratio, 3, "low_slope_ratio")
         if np.any(ratio < 1.0):
             raise ConfigError(f"low_slope_ratio must be >= 1 on every axis, got {ratio.tolist()}")
         object.__setattr__(self, "low_slope_ratio", ratio)
+        quiet = as_vector(self.quiet_ratio, 3, "quiet_ratio")
+        if np.any(quiet <= 0.0) or np.any(quiet > 1.0):
+            raise ConfigError(f"quiet_ratio must be in (0, 1] on every axis, got {quiet.tolist()}")
+        object.__setattr__(self, "quiet_ratio", quiet)
         object.__setattr__(
             self,
             "moving_deadband",
             as_nonnegative_vector(self.moving_deadband, 3, "moving_deadband"),
         )
-        for name in ("corner_hz", "settle_s", "release_s"):
+        for name in ("corner_hz", "settle_s", "release_s", "quiet_hz", "contact_N"):
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
@@ -110,15 +138,19 @@ class Glide:
         self.moving = np.zeros(3)  # the sign of the push that moves the probe, per axis; 0: at rest
         self.deadband = np.full(3, np.nan)  # η_i while moving
         self.slow = np.zeros(3)  # ū
+        self.quiet = np.zeros(3)  # w̄
 
     @property
     def active(self) -> bool:
         """Whether the probe moves on any axis under a deadband below eq. 10's."""
         return bool(self.moving.any())
 
-    def step(self, dt: float, F: Vec3, slope: Vec3, deadband: Vec3) -> Vec3:
+    def step(
+        self, dt: float, F: Vec3, slope: Vec3, deadband: Vec3, contact_N: float | None = None
+    ) -> Vec3:
         """The translation command for the compensated hand force `F` under eq. 10's `slope` and
-        `deadband` (the translation law's gains)."""
+        `deadband` (the translation law's gains); `contact_N` the probe force along its axis,
+        pressing positive (None: no probe sensor, never in contact)."""
         p = self.params
         F = np.asarray(F, dtype=np.float64)
         size = np.abs(F)
@@ -135,4 +167,11 @@ class Glide:
         fading = self.slow * decay
         fading[np.abs(fading) < _REST] = 0.0
         self.slow = np.where(u == 0.0, fading, self.slow + (u - self.slow) * follow)
-        return u + (p.low_slope_ratio - 1.0) * self.slow
+        w = u + (p.low_slope_ratio - 1.0) * self.slow
+        quiet = self.quiet + (w - self.quiet) * (1.0 - math.exp(-2.0 * math.pi * p.quiet_hz * dt))
+        quiet[(w == 0.0) & (np.abs(quiet) < _REST)] = 0.0
+        self.quiet = quiet
+        if contact_N is None or contact_N <= p.contact_N:
+            return w
+        q = p.quiet_ratio
+        return q * w + (1.0 - q) * quiet
