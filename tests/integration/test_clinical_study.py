@@ -199,10 +199,10 @@ def test_the_follow_mode_takes_the_breath_out_of_the_contact(study) -> None:
 
 def test_the_glide_mode_spares_the_hand_on_the_scan_and_steadies_the_image(study) -> None:
     """Glide on the follow mode: on every operator's scan the hand pushes less than with the follow
-    alone (the full study: 65-79 % less than freehand against 49-60 %); quieter along the probe in
-    contact, the image is steadier than the follow mode's on the whole (the full study: 0.74, 0.81
-    and 0.86 of its jitter on the view, the scan and the press, per operator on average; the quick
-    study's 0.66-0.77), no run's much less steady; and the breath is still followed."""
+    alone (the full study: 66-79 % less than freehand against 49-60 %); quieter along the probe in
+    contact, the image is steadier than the follow mode's on the whole (the full study: 0.62, 0.68
+    and 0.74 of its jitter on the view, the scan and the press, per operator on average; the quick
+    study's 0.51-0.77), no run's much less steady; and the breath is still followed."""
     assert set(MODES["follow"].overrides) < set(MODES["glide"].overrides)
     assert "controller.glide.enabled=true" in MODES["glide"].overrides
     _, out = study
@@ -216,7 +216,7 @@ def test_the_glide_mode_spares_the_hand_on_the_scan_and_steadies_the_image(study
             effort = float(row["hand_force_rms_N"]) / float(follow["hand_force_rms_N"])
             assert effort < 0.85, (operator, effort)
     assert len(ratios) == OPERATORS * len(TASKS)
-    assert float(np.mean(ratios)) < 0.9, ratios
+    assert float(np.mean(ratios)) < 0.85, ratios
 
 
 def test_hold_on_release_holds_the_breathing_contact_and_hands_back(study) -> None:

@@ -383,9 +383,9 @@ def test_the_controller_fmu_glides_on_a_scan_with_less_of_the_hands_force():
     assert m["hand_force_rms_N"] < 0.85 * m_off["hand_force_rms_N"]
     assert m["path_rms_error_m"] < m_off["path_rms_error_m"]
     # the lag keeps eq. 10's slope above its corner (eq. 10 at the light slope throughout doubles
-    # the jitter), and along the probe in contact a third of it above 1 Hz: 16.1 against 21.7 µm
-    # (21.3 without the quiet part)
-    assert m["jitter_image_mm"] < 0.9 * m_off["jitter_image_mm"]
+    # the jitter), and along the probe in contact a hand keeping the contact meets a third of it
+    # above 0.5 Hz: 14.9 against 21.7 µm (21.3 without the quiet part)
+    assert m["jitter_image_mm"] < 0.8 * m_off["jitter_image_mm"]
     assert m["contact_losses"] == m_off["contact_losses"] == 0
 
 

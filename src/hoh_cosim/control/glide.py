@@ -41,15 +41,24 @@ modes' jitter comes from"). While the probe force along its axis exceeds `contac
 
     w_i     = u_i + (r_i - 1) ū_i                        (the command above)
     w̄_i     w_i low-passed at `quiet_hz` (always, in contact or not)
-    ẋ_i     = q_i w_i + (1 - q_i) w̄_i                    (q_i = `quiet_ratio`, at most 1)
+    γ_i     the quiet part's weight: a b_i. a rises from 0 to 1 over `quiet_blend_s` once the
+            contact begins (0 out of contact); b_i falls from 1 to 0 as |F̃_i| goes from
+            `quiet_push_N` to `quiet_push_N` + `quiet_push_span_N`
+    ẋ_i     = w_i + γ_i (1 - q_i) (w̄_i - w_i)          (q_i = `quiet_ratio`, at most 1)
 
-the lag network (1 + q τ s) / (1 + τ s) with τ = 1 / (2π f_q) on the law's command: the law's slope
-for a steady push (the same travel for any push, only later, by at most τ = 0.16 s at f_q = 1 Hz),
-q of it well above f_q (0.45 at 3 Hz for q = 1/3). Its price is phase at the hand's press loop's
-crossover, about 2.8 rad/s (`hoh_cosim.study.clinical.FREEHAND_PRESS`): -16° at 1 Hz and q = 1/3.
-Out of contact (the approach, where the touch-down is a step of the contact) the command is w as
-it is. On x and y the default q is 1: there the command is w exactly. Like the low-passed part,
-w̄ is zero once under 1 µm/s while the law commands nothing.
+With γ = 1 it is the lag network (1 + q τ s) / (1 + τ s), τ = 1 / (2π f_q), on the law's command:
+the law's slope for a steady push (the same travel, only later), q of it well above f_q (0.40 at 2
+Hz and 0.35 at 4 Hz for q = 1/3 and f_q = 0.5 Hz). Its price is phase at the hand's press loop's
+crossover, about 2.8 rad/s (`hoh_cosim.study.clinical.FREEHAND_PRESS`): -25° at 0.5 Hz, more than
+the loop can spare (without the gate below, -21° at 0.7 Hz already limit-cycled one press of
+twenty). Hence the gate on the push: the hand's press loop pushes along the probe beyond 1 N (the
+follow's and the hold's band for a push) when it presses to a new force, and when it begins to
+swing. There the quiet part gives way to eq. 10 and its phase. It quiets what is small: the sensors'
+noise and the fine corrections of a hand keeping the contact. A swing of the press loop cannot grow
+past the size at which eq. 10's phase is back. The blend keeps it out of the touch-down, where the
+approaching probe must stop at once and the sensors' different lags make F̃ swing. Out of contact
+the command is w as it is. On x and y the default q is 1: there the command is w exactly. Like the
+low-passed part, w̄ is zero once under 1 µm/s while the law commands nothing.
 
 After a release the low-passed part decays over `release_s` (50 ms), not the corner's 0.32 s: at a
 steady 1 cm/s it carries the tip 0.34 mm further than eq. 10 would, against the 1 m/s² limit's
@@ -92,6 +101,9 @@ class GlideParams:
         "quiet_ratio": "1",
         "quiet_hz": "Hz",
         "contact_N": "N",
+        "quiet_blend_s": "s",
+        "quiet_push_N": "N",
+        "quiet_push_span_N": "N",
     }
 
     enabled: bool = False
@@ -104,8 +116,11 @@ class GlideParams:
     release_s: float = 0.05  # [s] the low-passed part's decay once eq. 10 commands nothing
     # q: in contact, the slope a quick push meets, in multiples of a steady push's (1: as it is)
     quiet_ratio: Vec3 = field(default_factory=lambda: frozen([1.0, 1.0, 1.0 / 3.0]))
-    quiet_hz: float = 1.0  # f_q: above it, in contact, the slope falls to q times
+    quiet_hz: float = 0.5  # f_q: above it, in contact, the slope falls to q times
     contact_N: float = 3.0  # [N] the probe force along its axis above which the probe is in contact
+    quiet_blend_s: float = 0.5  # [s] the quiet part's way in once the contact begins
+    quiet_push_N: float = 1.0  # [N] a push beyond this on an axis ...
+    quiet_push_span_N: float = 0.5  # [N] ... and this much more meets eq. 10 (the quiet part out)
 
     def __post_init__(self) -> None:
         ratio = as_vector(self.low_slope_ratio, 3, "low_slope_ratio")
@@ -121,7 +136,16 @@ class GlideParams:
             "moving_deadband",
             as_nonnegative_vector(self.moving_deadband, 3, "moving_deadband"),
         )
-        for name in ("corner_hz", "settle_s", "release_s", "quiet_hz", "contact_N"):
+        for name in (
+            "corner_hz",
+            "settle_s",
+            "release_s",
+            "quiet_hz",
+            "contact_N",
+            "quiet_blend_s",
+            "quiet_push_N",
+            "quiet_push_span_N",
+        ):
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
             )
@@ -139,6 +163,7 @@ class Glide:
         self.deadband = np.full(3, np.nan)  # η_i while moving
         self.slow = np.zeros(3)  # ū
         self.quiet = np.zeros(3)  # w̄
+        self.quiet_in = 0.0  # a: the quiet part's blend since the contact began
 
     @property
     def active(self) -> bool:
@@ -172,6 +197,8 @@ class Glide:
         quiet[(w == 0.0) & (np.abs(quiet) < _REST)] = 0.0
         self.quiet = quiet
         if contact_N is None or contact_N <= p.contact_N:
+            self.quiet_in = 0.0
             return w
-        q = p.quiet_ratio
-        return q * w + (1.0 - q) * quiet
+        self.quiet_in = min(1.0, self.quiet_in + dt / p.quiet_blend_s)
+        give = np.clip((np.abs(F) - p.quiet_push_N) / p.quiet_push_span_N, 0.0, 1.0)
+        return w + self.quiet_in * (1.0 - give) * (1.0 - p.quiet_ratio) * (quiet - w)

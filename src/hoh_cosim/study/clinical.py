@@ -282,9 +282,10 @@ GLIDE = (*FOLLOW_BREATH, "controller.glide.enabled=true")
 """The follow mode with glide (`hoh_cosim.control.glide`): eq. 10 light for a steady push (3.2
 times the slope under 0.5 Hz on the base's x and y, across the upright probe; the seed's slope
 above), and a 0.3 N deadband there once the probe moves, so that the hand steering a scan pays less
-than the seed's 0.95 N and the image meets the seed's slope; along z in contact a third of the
-seed's slope above 1 Hz, so that the image moves less along the beam (docs/decisions.md, "Glide"
-and "Glide quieter along the probe in contact")."""
+than the seed's 0.95 N and the image meets the seed's slope; along z in contact, for a hand keeping
+the contact (a push under 1 N along it), a third of the seed's slope above 0.5 Hz, so that the image
+moves less along the beam (docs/decisions.md, "Glide" and "Glide quieter along the probe in
+contact")."""
 
 
 @dataclass(frozen=True)
