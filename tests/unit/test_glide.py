@@ -1,6 +1,6 @@
 """Glide: eq. 10 lighter for a steady push than for a quick one, with a smaller deadband once the
-probe moves, and quieter for a quick push along the probe in contact. The block's gains against the
-lag networks', its deadbands at rest and in motion, what it leaves after a release, and the
+probe moves, and quieter along the probe for a hand keeping the contact. The block's gains against
+the lag networks', its deadbands at rest and in motion, what it leaves after a release, and the
 controller around it (off by default, reset when braking, in contact by the probe force, eq. 10
 only)."""
 
@@ -238,8 +238,8 @@ def test_the_controller_glides_only_when_asked():
 
 def test_the_controller_is_quieter_along_the_probe_only_in_contact():
     # the hand's force along the probe 0.7 N with 0.2 N at 3 Hz on it, the probe pressed by 8 N
-    # along its axis (handle to tip: down) or touching nothing: F̃ the same either way (the wrist
-    # reads the hand's force and the contact's, eq. 11-12 takes the contact out)
+    # along its axis (handle to tip: down) or by 2 N, under the contact's 3 N: F̃ the same (the
+    # wrist reads the hand's force and the contact's, eq. 11-12 takes the contact out)
     def command(contact_N: float) -> np.ndarray:
         ctl = HandGuidingController(ControllerParams(glide=GlideParams(enabled=True)))
         F_probe = np.array([0.0, 0.0, contact_N])

@@ -10,7 +10,7 @@ Per tick:
                point, `contact_torque`); v = law(F̃) (eq. 10 or an alternative: `variable` adapts
                eq. 10's slope to the hand's intent), ω = law(τ̃)
     glide      eq. 10 lighter for a steady push than for a quick one, with a smaller deadband
-               once the probe moves, and quieter for a quick push along the probe in contact
+               once the probe moves, and quieter along the probe for a hand keeping the contact
                (`hoh_cosim.control.glide`, if on; eq. 10's law only): part of the law, before the
                release detector reads it
     release    the hand let go (`hoh_cosim.control.release`, if on): the command is rest, braked at

@@ -1,4 +1,5 @@
-"""Glide: eq. 10 lighter for a steady push than for a quick one (the law's part, per base axis).
+"""Glide: eq. 10 lighter for a steady push than for a quick one, and quieter along the probe for a
+hand keeping the contact (the law's part, per base axis).
 
 Eq. 10 (seed 000, 3.F.1) is one slope α for every frequency of the hand's force: ẋ = α (|F̃| - η)
 sgn F̃. Its two costs pull its gains in opposite directions (docs/decisions.md, "The scan's
@@ -83,8 +84,8 @@ from hoh_cosim.errors import ConfigError
 __all__ = ["Glide", "GlideParams"]
 
 _REST = 1e-6
-"""[m/s] The low-passed parts' decay ends here, at rest: an exponential never reaches zero, and a law
-that still asked for a nanometre a second would keep the release detector guiding (it reads
+"""[m/s] The low-passed parts' decay ends here, at rest: an exponential never reaches zero, and a
+law that still asked for a nanometre a second would keep the release detector guiding (it reads
 whether the law asks for motion) long after the hand let go."""
 
 
