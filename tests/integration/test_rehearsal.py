@@ -244,10 +244,10 @@ def test_a_probe_silenced_by_a_starved_machine_is_not_taken_for_a_silent_device(
             time.sleep(0.01)
         # This thread and the session's stop watcher are ordinary Python threads in the runner's
         # process. One that holds the GIL when the hogs take every core cannot run to hand it
-        # over, and the loop waits the hogs out: 354 ms once in CI, while this thread was still
-        # spawning the last hog. Above the hogs (below the readers' 49 and the loop's 50) they are
-        # never starved by them. Without the right to raise them the hogs cannot start either,
-        # and the test skips below.
+        # over, and the loop waits the hogs out (354 ms once in CI; this thread, busy spawning
+        # the hogs just then, is the likeliest holder). Above the hogs (below the readers' 49 and
+        # the loop's 50) they are never starved by them. Without the right to raise them the hogs
+        # cannot start either, and the test skips below.
         harness = [threading.current_thread()] + [
             t for t in threading.enumerate() if t.name == "stop-at-world-time"
         ]
