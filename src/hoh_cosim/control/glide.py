@@ -201,5 +201,5 @@ class Glide:
             self.quiet_in = 0.0
             return w
         self.quiet_in = min(1.0, self.quiet_in + dt / p.quiet_blend_s)
-        give = np.clip((np.abs(F) - p.quiet_push_N) / p.quiet_push_span_N, 0.0, 1.0)
+        give = np.clip((size - p.quiet_push_N) / p.quiet_push_span_N, 0.0, 1.0)
         return w + self.quiet_in * (1.0 - give) * (1.0 - p.quiet_ratio) * (quiet - w)
