@@ -220,7 +220,7 @@ def _packets(det, push_N, seconds, rng, let_go_s=None, sigma=(0.67, 0.31, 0.48))
 
 def test_a_light_push_in_contact_is_not_taken_for_a_let_go(rng):
     """1.7 N on x in contact for 60 s: the estimate steps at each packet by its gain times the
-    packet's noise, 0.07 N on average, 9 deadbands/s over one 8 ms tick. The one-tick trend
+    packet's noise, 0.07 N RMS, 9 deadbands/s over one 8 ms tick. The one-tick trend
     (trend_s 0) takes the larger steps for a let-go whenever the packet dips into its band; over
     40 ms they average out."""
     one_tick, _ = _packets(
