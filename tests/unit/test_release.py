@@ -189,18 +189,18 @@ def test_release_parameters_are_checked():
         ReleaseParams(trend_s=-0.01)
 
 
-def _packets(det, push_N, seconds, rng, let_go_s=None, sigma=(0.67, 0.31, 0.48)):
+def _packets(det, push_N, seconds, rng, let_go_s=None, sigma=(0.67, 0.31, 0.48), dt=DT):
     """A hand pushing `push_N` on x (letting go at `let_go_s`), as the controller sees it in
     contact: FT-150 packets every 5 ms carrying the compensated noise measured on the clinical
     study's scan (σ per axis), the estimate a first-order filter of 47 ms (`lead_lowpass`'s time
-    constant) updated at each packet, the detector stepped every 8 ms on the newest of both.
+    constant) updated at each packet, the detector stepped every `dt` on the newest of both.
     Returns the times it braked at and when the estimate entered the deadband after the let-go."""
     gain = 1.0 - np.exp(-0.005 / 0.047)
     F_hat = np.array([push_N, 0.0, 0.0])
     raw = F_hat.copy()
     t_packet, t_inside, brakes = 0.0, None, []
-    for k in range(int(seconds / DT)):
-        t = k * DT
+    for k in range(round(seconds / dt)):
+        t = k * dt
         while t_packet <= t:
             hand = 0.0 if let_go_s is not None and t_packet >= let_go_s else push_N
             raw = np.array([hand, 0.0, 0.0]) + rng.normal(0.0, sigma)
@@ -218,27 +218,30 @@ def _packets(det, push_N, seconds, rng, let_go_s=None, sigma=(0.67, 0.31, 0.48))
     return brakes, t_inside
 
 
-def test_a_light_push_in_contact_is_not_taken_for_a_let_go(rng):
+@pytest.mark.parametrize("dt", [0.008, 0.002], ids=["CB3", "e-series"])
+def test_a_light_push_in_contact_is_not_taken_for_a_let_go(rng, dt):
     """1.7 N on x in contact for 60 s: the estimate steps at each packet by its gain times the
-    packet's noise, 0.07 N RMS, 9 deadbands/s over one 8 ms tick. The one-tick trend
-    (trend_s 0) takes the larger steps for a let-go whenever the packet dips into its band; over
-    40 ms they average out."""
+    packet's noise, 0.07 N RMS, 9 deadbands/s over one 8 ms tick and 37 over an e-series's 2 ms.
+    The one-tick trend (trend_s 0) takes the larger steps for a let-go whenever the packet dips
+    into its band (87-115 times a minute at 8 ms, 641-752 at 2 ms over five seeds); over 40 ms
+    they average out at either rate."""
     one_tick, _ = _packets(
-        ReleaseDetector(ReleaseParams(enabled=True, trend_s=0.0)), 1.7, 60.0, rng
+        ReleaseDetector(ReleaseParams(enabled=True, trend_s=0.0)), 1.7, 60.0, rng, dt=dt
     )
-    window, _ = _packets(ReleaseDetector(ReleaseParams(enabled=True)), 1.7, 60.0, rng)
+    window, _ = _packets(ReleaseDetector(ReleaseParams(enabled=True)), 1.7, 60.0, rng, dt=dt)
     assert len(one_tick) >= 5, one_tick  # the cause: the one-tick trend on packet steps
     assert window == []
 
 
-def test_a_let_go_in_contact_is_still_told_before_the_deadband(rng):
+@pytest.mark.parametrize("dt", [0.008, 0.002], ids=["CB3", "e-series"])
+def test_a_let_go_in_contact_is_still_told_before_the_deadband(rng, dt):
     """A 3 N push let go in contact (the gap's 3 bands are 3.45 N on x, too far for its packet):
     the trend over 40 ms brakes after the let-go and before the estimate is back inside the
-    deadband in most let-gos (87 % of 200 measured, as often as the one-tick trend, 10 ms later);
-    the rest the law's own deadband stops."""
+    deadband in most let-gos (of 200 measured: 174 at 8 ms, as often as the one-tick trend and 10
+    ms later; 198 at 2 ms); the rest the law's own deadband stops."""
     told = 0
     for _ in range(40):
         det = ReleaseDetector(ReleaseParams(enabled=True))
-        brakes, inside = _packets(det, 3.0, 1.5, rng, let_go_s=1.0)
+        brakes, inside = _packets(det, 3.0, 1.5, rng, let_go_s=1.0, dt=dt)
         told += bool(brakes) and 1.0 <= brakes[0] < inside
     assert told >= 30, told
