@@ -164,8 +164,6 @@ class ReleaseDetector:
     def reset(self) -> None:
         self.phase = ReleasePhase.IDLE
         self.t_release: float | None = None
-        self._t_prev: float | None = None
-        self._n_prev = 0.0
         self._trend: deque[tuple[float, float]] = deque()  # (t, n) back to trend_s ago
         self.releases = 0  # how many times the hand let go since the reset
         self._band_key: tuple[int, int] | None = None
@@ -222,18 +220,21 @@ class ReleaseDetector:
         (None: no probe sensor). Returns whether the controller must hold the robot at rest."""
         p = self.params
         n, b_raw, gap = self._norms(F, F_raw, deadband)
-        dt = None if self._t_prev is None else t - self._t_prev
-        # ṅ = (‖F̂‖_η - ‖F̂_prev‖_η)/Δt: the trend of the force's size, not of each axis (an
-        # axis's noise extrapolated over the horizon would look like a push)
-        n_dot = (n - self._n_prev) / dt if dt is not None and dt > 0.0 else 0.0
-        self._t_prev, self._n_prev = t, n
-        # the oldest sample kept is the newest at least trend_s old (or the previous tick's)
+        # the trend of the force's size, not of each axis (an axis's noise extrapolated over the
+        # horizon would look like a push): ṅ over the last tick, ṅ_w over the last trend_s. The
+        # oldest sample kept is the newest at least trend_s old, the one before the newest is the
+        # previous tick's
         trend = self._trend
         trend.append((t, n))
         while len(trend) > 2 and t - trend[1][0] >= p.trend_s - 1e-9:
             trend.popleft()
-        t_old, n_old = trend[0]
-        n_dot_w = (n - n_old) / (t - t_old) if t > t_old else 0.0
+        n_dot = n_dot_w = 0.0
+        if len(trend) > 1:
+            (t_old, n_old), (t_prev, n_prev) = trend[0], trend[-2]
+            if t > t_prev:
+                n_dot = (n - n_prev) / (t - t_prev)
+            if t > t_old:
+                n_dot_w = (n - n_old) / (t - t_old)
 
         if self.phase.released:
             assert self.t_release is not None
