@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
-from hoh_cosim.control.follow import FollowParams
-from hoh_cosim.control.hold import HoldParams
+from hoh_cosim.control.follow import BreathFollower, FollowParams
+from hoh_cosim.control.hold import HoldParams, surface_filter_gain
 from hoh_cosim.control.release import ReleaseParams
 from hoh_cosim.control.supervisor import Status
 from hoh_cosim.errors import ConfigError
-from tests.patient import DT, K, Patient, run
+from tests.patient import AXIS, DT, K, Patient, run
 
 FOLLOWING = int(Status.FOLLOWING)
 
@@ -31,23 +31,131 @@ def swing(forces: np.ndarray) -> float:
     return float(late.max() - late.min())
 
 
-def test_the_breaths_swing_leaves_the_contact_as_the_loop_predicts():
+def rate_response(hz: float, dt: float, omega: float) -> complex:
+    """The surface filter's estimated speed over the true one, for a surface moving at ω."""
+    k = np.array(surface_filter_gain(hz, dt))
+    F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    A = (np.eye(3) - np.outer(k, [1.0, 0.0, 0.0])) @ F  # x_n = A x_(n-1) + k m_n
+    z = np.exp(1j * omega * dt)
+    return complex(np.linalg.solve(np.eye(3) - A / z, k)[1]) / (1j * omega)
+
+
+@pytest.mark.parametrize("surface_gain", [0.0, 0.4])
+def test_the_breaths_swing_leaves_the_contact_as_the_loop_predicts(surface_gain):
     # 5 mm at 15 a minute on 8 mm of depth: a still robot sees k · 2 · 5 mm = 12 N of swing
     still, _, _ = run(HandGuidingController(), Patient(amplitude_m=0.005), 0.0, 24.0)
     assert swing(still) == pytest.approx(2 * K * 0.005, rel=0.02)
 
-    ctl = following_controller()
+    ctl = following_controller(surface_gain=surface_gain)
     forces, flags, _ = run(ctl, Patient(amplitude_m=0.005), 0.0, 24.0)
     assert np.all(flags[round(0.5 / DT) :] & FOLLOWING)
-    # with c̄ the level, c̄' = (c - c̄) / τ, and k̂ = k: c = k s (1 + τ p) / (1 + g τ + τ p), so the
-    # swing left at ω = 2π · 0.25 /s is |1 + jωτ| / |1 + gτ + jωτ| = 0.44 (g = 3 /s, τ = 4 s; 0.46,
-    # the first-order high-pass's ω / √(ω² + g²), for a level that never moves)
+    # with c̄ the level, c̄' = (c - c̄) / τ, and k̂ = k: the tip's speed is g (c - c̄) / k + κ ṡ̂,
+    # ṡ̂ = H ṡ the surface filter's estimate, and c = k (s - z), so
+    #     c / (k s) = (jω - κ H jω) / (jω + g jωτ / (1 + jωτ)),
+    # without the feed-forward |1 + jωτ| / |1 + gτ + jωτ| = 0.44 at ω = 2π · 0.25 /s (g = 3 /s,
+    # τ = 4 s); with κ = 0.4 and the 1 Hz filter (|H| = 1.11 at the breath) 0.24
     omega, g, tau = 2 * math.pi * 0.25, 3.0, 4.0
-    predicted = abs(complex(1.0, omega * tau) / complex(1.0 + g * tau, omega * tau))
+    jw = complex(0.0, omega)
+    H = rate_response(1.0, DT, omega)
+    predicted = abs(jw * (1.0 - surface_gain * H)) / abs(jw + g * jw * tau / (1.0 + jw * tau))
     ratio = swing(forces) / swing(still)
-    assert ratio == pytest.approx(predicted, abs=0.05)
+    assert ratio == pytest.approx(predicted, abs=0.03)
     # the level is the sonographer's: the mean force stays where the contact began (9.6 N)
     assert np.mean(forces[-round(8.0 / DT) :]) == pytest.approx(K * 0.008, abs=0.6)
+
+
+class PlayPatient(Patient):
+    """The probe sensor read through a play of width w (plant_models.sensors' housing): its reading
+    moves only once the contact has moved w past it."""
+
+    def __init__(self, play_N: float, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.play_N = play_N
+        self.read_N: float | None = None
+
+    def inputs(self, t: float, hand_N: float = 0.0, hand_x_N: float = 0.0) -> dict:
+        out = super().inputs(t, hand_N, hand_x_N)
+        c = self.force(t)
+        read = c if self.read_N is None else min(max(self.read_N, c - self.play_N), c + self.play_N)
+        self.read_N = read
+        out["F_probe_B"] = out["F_probe_meas_B"] = -read * AXIS
+        return out
+
+
+def test_the_surface_fed_forward_through_the_probes_play_takes_more_of_the_swing_and_keeps_the_level():
+    # the play hides the contact once it stops changing: m then moves with the tip, and the
+    # feed-forward is the robot's own speed fed back with gain κ < 1 (module docstring). With
+    # 0.8 N of play (the housing's widest) the loop stays put and still takes more of the swing
+    swings, means = {}, {}
+    for surface_gain in (0.0, 0.4, 0.9):
+        patient = PlayPatient(0.8, amplitude_m=0.005)
+        forces, flags, _ = run(following_controller(surface_gain=surface_gain), patient, 0.0, 40.0)
+        assert np.all(flags[round(0.5 / DT) :] & FOLLOWING)
+        swings[surface_gain] = swing(forces)
+        means[surface_gain] = float(np.mean(forces[-round(8.0 / DT) :]))
+    assert swings[0.4] < 0.8 * swings[0.0]
+    assert swings[0.9] < 0.8 * swings[0.4]
+    for mean in means.values():
+        assert mean == pytest.approx(K * 0.008, abs=0.6)
+
+
+def follower_inputs(t, z, c, hand_N=0.0):
+    """The follow's own inputs for a tip at depth coordinate z (p_BT along B's z), contact c, a
+    hand pressing hand_N along the probe: the wrist reads both, the probe the contact."""
+    contact = -c * AXIS
+    return {
+        "F_tilde": hand_N * AXIS,
+        "F_probe": contact,
+        "axis": AXIS,
+        "t": t,
+        "p_BT": np.array([0.3, 0.0, z]),
+        "F_wrist_meas": hand_N * AXIS + contact,
+        "F_probe_meas": contact,
+    }
+
+
+def test_a_steady_push_along_the_probe_is_the_hands_share_and_not_the_surface():
+    # a still patient and a still tip, 9.6 N; the hand presses 0.5 N along the probe from 2 s
+    # (under the push band: the level stays the breath's). The wrist reads it at once and the hand's
+    # share ĥ takes it over share_s: the surface's speed estimate returns to rest
+    follow = BreathFollower(FollowParams(enabled=True, share_s=4.0))
+    z, c = 0.3 - 0.008, K * 0.008
+    rates = []
+    for k in range(round(30.0 / DT)):
+        t = k * DT
+        follow.step(DT, **follower_inputs(t, z, c, hand_N=0.5 if t >= 2.0 else 0.0))
+        rates.append(follow.surface_m_s)
+    rates = np.array(rates)
+    assert np.all(rates[: round(2.0 / DT)] == 0.0)
+    # the push read as the surface sinking by 0.5 N / k̂ (0.42 mm), then taken back as ĥ grows
+    assert rates.min() < -1e-4
+    assert np.all(np.abs(rates[-round(5.0 / DT) :]) < 2e-5)
+    # the probe reads 0.5 N more than the wrist: the hand's share
+    assert follow.share_N == pytest.approx(0.5, abs=0.01)
+
+
+def test_the_surface_takes_the_tip_where_the_wrists_packet_was_sampled():
+    # a still surface; the tip moves ±2 mm at 1 Hz into it; the wrist's packets come every 5 ms,
+    # each sampled 2 ms before it arrives and held. With the packet's age, m = z + c / k̂ is the
+    # surface at every tick and the speed estimate stays at rest; without it, the tip's speed
+    # leaks in (up to 12.6 mm/s · the 2-7 ms the packet is old)
+    worst = {}
+    for with_age in (True, False):
+        follow = BreathFollower(FollowParams(enabled=True))
+        sampled_at, packet_c = 0.0, K * 0.008
+        for k in range(round(6.0 / (DT / 4))):
+            t = k * DT / 4  # a 2 ms tick
+            tip = 0.3 - 0.008 + 0.002 * math.sin(2 * math.pi * t)
+            if t - 0.002 >= sampled_at + 0.005 - 1e-9:  # a packet sampled 2 ms ago arrives
+                sampled_at += 0.005
+                packet_c = K * (0.3 - (0.3 - 0.008 + 0.002 * math.sin(2 * math.pi * sampled_at)))
+            age = t - sampled_at - 0.002 if with_age else 0.0
+            inputs = follower_inputs(t, tip, packet_c)
+            follow.step(DT / 4, **inputs, ft_age=age)
+            if t > 2.0:
+                worst[with_age] = max(worst.get(with_age, 0.0), abs(follow.surface_m_s))
+    assert worst[True] < 1e-5
+    assert worst[False] > 1e-4
 
 
 def test_a_push_along_the_probe_sets_a_new_level_and_is_not_fought():
@@ -130,6 +238,32 @@ def test_the_follow_moves_the_tip_no_farther_than_its_travel():
     assert forces[-1] > 1.0
 
 
+def test_a_tip_steered_across_the_probe_moves_the_travels_origin():
+    # the surface sinks 2 mm/s under a tip that the hand steers sideways at 5 mm/s (over the skin
+    # the surface under the probe changes): the depth is the hand's, and the follow keeps the
+    # contact past its 20 mm. The tip's position comes in one array updated in place, as an
+    # engine's input buffer does
+    class Sinking(Patient):
+        def surface(self, t: float) -> float:
+            return 0.3 - 0.002 * t
+
+    for across_m_s, kept in ((0.005, True), (0.0, False)):
+        patient, ctl = Sinking(amplitude_m=0.0), following_controller()
+        z0, p_BT = patient.z, np.array([0.3, 0.0, patient.z])
+        for k in range(round(15.0 / DT)):
+            t = k * DT
+            inputs = patient.inputs(t)
+            p_BT[0] = 0.3 + across_m_s * t
+            p_BT[2] = patient.z
+            inputs["p_BT_B"] = p_BT
+            patient.z += ctl.step(t, DT, inputs)["twist_B"][2] * DT
+        if kept:
+            assert z0 - patient.z > 0.025
+            assert patient.force(15.0) > 3.0
+        else:
+            assert z0 - patient.z == pytest.approx(0.020, abs=1e-6)
+
+
 def test_the_hold_holds_alone_and_the_follow_stands_aside_and_forgets_its_level():
     ctl = HandGuidingController(
         ControllerParams(
@@ -159,3 +293,11 @@ def test_follow_params_reject_a_value_that_is_not_positive(key):
     with pytest.raises(ConfigError, match=rf"^{key} must be > 0.0, got -1.0$") as caught:
         FollowParams(**{key: -1.0})
     assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("value", [1.0, -0.1])
+def test_the_surface_gain_must_be_under_one_and_not_negative(value):
+    with pytest.raises(ConfigError, match=r"^surface_gain must be ") as caught:
+        FollowParams(surface_gain=value)
+    assert "\n" not in str(caught.value)
+    assert str(value) in str(caught.value)

@@ -28,7 +28,8 @@ Per tick:
                direction
     follow     following the breath while the hand steers (`hoh_cosim.control.follow`, if on; not
                while braking or holding): in contact, the axial contact force's departure from its
-               level over about a breath, g (c - c̄) / k̂, is added along the probe axis, after the
+               level over about a breath, g (c - c̄) / k̂, and the surface's estimated speed,
+               κ ṡ, are added along the probe axis, after the
                fixture (which keeps the hand from lifting the probe off; riding a rising abdomen
                is not that)
     limits     the supervisor's `limit_command`: speed clamp · acceleration clamp (the braking
@@ -267,10 +268,12 @@ class HandGuidingController:
         return self._release
 
     def prepare(self, dt: float) -> None:
-        """What can be computed before a loop stepped every `dt` (the hold's filter gain), so that
-        no cycle of a robot's loop pays for it."""
+        """What can be computed before a loop stepped every `dt` (the hold's and the follow's
+        filter gains), so that no cycle of a robot's loop pays for it."""
         if self.params.hold.enabled:
             self._hold.prepare(dt)
+        if self.params.follow.enabled:
+            self._follow.prepare(dt)
 
     @property
     def follow(self) -> BreathFollower:
@@ -441,7 +444,17 @@ class HandGuidingController:
             if braking or holding or axis is None or not axis.any():
                 self._follow.stop()
             else:
-                v_follow = self._follow.step(dt, F, F_probe, axis)
+                v_follow = self._follow.step(
+                    dt,
+                    F,
+                    F_probe,
+                    axis,
+                    t,
+                    inputs["p_BT_B"],
+                    inputs.get("F_hand_meas_B"),
+                    inputs.get("F_probe_meas_B"),
+                    float(inputs["ft_age"][0]),
+                )
                 if v_follow is not None:
                     v = v + v_follow
                     status |= _FOLLOWING

@@ -95,6 +95,7 @@ import enum
 import functools
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -110,6 +111,8 @@ __all__ = [
     "HoldEnd",
     "HoldParams",
     "HoldPhase",
+    "sample_at",
+    "surface_filter_gain",
     "surface_observer_gain",
 ]
 
@@ -320,6 +323,23 @@ def surface_observer_gain(params: HoldParams, dt: float) -> Vec:
     return np.array(
         _gain(params.force_noise_N, params.stiffness_N_m, params.observer_hz, float(dt))
     )
+
+
+def surface_filter_gain(hz: float, dt: float) -> tuple[float, ...]:
+    """The steady-state gain of `surface_observer_gain`'s filter for a bandwidth `hz` and a step
+    `dt`. It does not depend on the noise's size or the stiffness: q and r scale together."""
+    return _gain(1.0, 1.0, hz, float(dt))
+
+
+def sample_at(history: Sequence[tuple[float, Any]], when: float) -> Any:
+    """The value at time `when` from (time, value) samples in time order, linear between two; the
+    oldest value before them all. Values may be floats or arrays."""
+    t1, z1 = history[-1]
+    for t0, z0 in reversed(history):
+        if t0 <= when:
+            return z0 if t1 <= t0 else z0 + (z1 - z0) * (when - t0) / (t1 - t0)
+        t1, z1 = t0, z0
+    return history[0][1]
 
 
 @functools.lru_cache(maxsize=64)
@@ -534,13 +554,7 @@ class ContactHold:
         history.append((t, z - turned))
         while len(history) > 2 and t - history[1][0] >= _HISTORY_S:
             history.popleft()
-        when = t - age - self.params.latency_s
-        t1, z1 = history[-1]
-        for t0, z0 in reversed(history):
-            if t0 <= when:
-                return turned + (z0 if t1 <= t0 else z0 + (z1 - z0) * (when - t0) / (t1 - t0))
-            t1, z1 = t0, z0
-        return turned + history[0][1]
+        return turned + sample_at(history, t - age - self.params.latency_s)
 
     def watch(
         self,
