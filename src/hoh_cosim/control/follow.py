@@ -56,9 +56,8 @@ image; larger κ steadies the contact more and the image less.
 The follow moves the probe by itself, so it is bounded like the hold: its command since the
 contact began (a gap shorter than `level_s` is the same contact), or since the hand last pushed
 along the axis or steered the tip across it faster than `steer_speed` over the last 0.1 s (the
-depth is the hand's then: over the skin the surface under the probe changes, 48 mm along the
-clinical study's scan line, and the feed-forward follows it), is kept
-within `max_travel_m` (more than a deep breath's 15 mm); its speed within `max_speed`; the
+hand is moving the probe then, and the pose is its own), is kept within `max_travel_m` (more than
+a deep breath's 15 mm); its speed within `max_speed`; the
 supervisor's limits (speed, acceleration, soft force cap, workspace, stops) apply after it as to
 every command; it never acts out of contact, while the release detector brakes, or while the hold
 holds. Without contact compensation F̃ holds the contact too, reads as a push, and the level follows
