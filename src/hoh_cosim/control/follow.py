@@ -24,10 +24,11 @@ the hand lets go; this block does the breath's part of that while the hand steer
 With the tissue c = k (s - z) (s the surface, z the tip, both along a), ċ = k ṡ - g (k / k̂) (c - c̄):
 for a level that did not move, the breath's force swing k ṡ would pass through a first-order
 high-pass at ω_c = g k / k̂, leaving ω / √(ω² + ω_c²) of it at the breath's angular frequency ω
-(about 0.4-0.6 at 12-20 breaths a minute for g = 3 /s and k̂ = k). With the level's low-pass
-(τ = `level_s`) it is |1 + jωτ| / |1 + ω_c τ + jωτ|, a little less (0.44 against 0.46 at 15 a
-minute): the level's corner, 1 / τ, is well under the breath. The probe force's noise reaches the tip through g / k̂ = 0.0025 m/(s·N), a
-fifth of eq. 10's slope, and only in contact. A k̂ off by a factor ρ = k / k̂ scales ω_c by ρ; the
+(about 0.4-0.6 at 12-20 breaths a minute for g = 3 /s and k̂ = k; 0.6-0.8 for the default 1.5 /s,
+which leaves the breath's part to the feed-forward below). With the level's low-pass (τ =
+`level_s`) it is |1 + jωτ| / |1 + ω_c τ + jωτ|, a little less (0.44 against 0.46 at 15 a minute for
+3 /s): the level's corner, 1 / τ, is well under the breath. The probe force's noise reaches the tip
+through g / k̂ = 0.00125 m/(s·N), a tenth of eq. 10's slope, and only in contact. A k̂ off by a factor ρ = k / k̂ scales ω_c by ρ; the
 loop is one integrator and stays stable for any ρ > 0 while ω_c is well under the sensors' and the
 robot's delays' corner (about 25 rad/s for 40 ms).
 
@@ -49,9 +50,11 @@ of the probe force's noise to the tip. The surface's own motion is fed forward b
 With k̂ = k, m does not depend on the robot, and κ = 1 would take the whole breath out. But where
 the signal m gives moves with the tip (a probe packet inside the play, a quick push of the hand
 that ĥ has not taken yet), the feed-forward is the robot's own speed fed back: a loop of gain κ,
-which must stay under 1. Measured on the clinical study's runs (docs/decisions.md, "Following the
-breath with the surface fed forward"): κ = 0.4 halves the contact force's swing and steadies the
-image; larger κ steadies the contact more and the image less.
+which must stay under 1. With both, 0.375 of the breath's swing is left at 15 a minute (0.34-0.41
+at 12-20; g = 3 /s alone left 0.44). Measured on the clinical study's runs (docs/decisions.md,
+"Following the breath with the surface fed forward"): with κ = 0.4 and g = 1.5 /s the image is
+steadier than with g = 3 /s alone and the contact's std lower; a larger κ or g steadies the contact
+more and the image less.
 
 The follow moves the probe by itself, so it is bounded like the hold: its command since the
 contact began (a gap shorter than `level_s` is the same contact), or since the hand last pushed
@@ -104,7 +107,7 @@ class FollowParams:
     }
 
     enabled: bool = False
-    gain_per_s: float = 3.0  # g [1/s]: the high-pass's corner with k̂ = k
+    gain_per_s: float = 1.5  # g [1/s]: the high-pass's corner with k̂ = k
     stiffness_N_m: float = 1200.0  # k̂ [N/m], as the hold's
     level_s: float = 4.0  # [s] the level's low-pass: about a breath at 15 a minute
     push_level_s: float = 0.1  # [s] ... while the hand pushes along the axis
