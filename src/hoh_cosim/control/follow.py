@@ -28,12 +28,12 @@ high-pass at ω_c = g k / k̂, leaving ω / √(ω² + ω_c²) of it at the brea
 which leaves the breath's part to the feed-forward below). With the level's low-pass (τ =
 `level_s`) it is |1 + jωτ| / |1 + ω_c τ + jωτ|, a little less (0.44 against 0.46 at 15 a minute for
 3 /s): the level's corner, 1 / τ, is well under the breath. The probe force's noise reaches the tip
-through g / k̂ = 0.00125 m/(s·N), a tenth of eq. 10's slope, and only in contact. A k̂ off by a factor ρ = k / k̂ scales ω_c by ρ; the
-loop is one integrator and stays stable for any ρ > 0 while ω_c is well under the sensors' and the
-robot's delays' corner (about 25 rad/s for 40 ms).
+through g / k̂ = 0.00125 m/(s·N), a tenth of eq. 10's slope, and only in contact. A k̂ off by a
+factor ρ = k / k̂ scales ω_c by ρ; the loop is one integrator and stays stable for any ρ > 0 while
+ω_c is well under the sensors' and the robot's delays' corner (about 25 rad/s for 40 ms).
 
-The loop above leaves about half of the breath's swing in the contact, and a faster g passes more
-of the probe force's noise to the tip. The surface's own motion is fed forward besides
+The loop above leaves half of the breath's swing in the contact or more, and a faster g passes
+more of the probe force's noise to the tip. The surface's own motion is fed forward besides
 (`surface_gain` κ > 0), as the hold estimates it (`hoh_cosim.control.hold`):
 
     m        z_d + c_s / k̂: where the surface is along the probe, outward. z_d = -p_BT · a, the tip
