@@ -180,9 +180,9 @@ class BreathFollower:
         self.reset()
 
     def prepare(self, dt: float) -> None:
-        """Compute the surface filter's gain for a step of `dt` now, before a robot's loop."""
-        if self.params.surface_gain > 0.0:
-            surface_filter_gain(self.params.surface_hz, dt)
+        """Compute the surface filter's gain for a step of `dt` now, before a robot's loop (also
+        with `surface_gain` 0: it may be tuned on in the loop)."""
+        surface_filter_gain(self.params.surface_hz, dt)
 
     def step(
         self,
