@@ -77,7 +77,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hoh_cosim.control.hold import sample_at, surface_filter_gain
+from hoh_cosim.control.history import keep_span, sample_at
+from hoh_cosim.control.hold import surface_filter_gain
 from hoh_cosim.control.vectors import Vec3, as_scalar
 from hoh_cosim.errors import ConfigError
 
@@ -210,8 +211,7 @@ class BreathFollower:
         if t is not None and p_BT is not None:
             tips = self._tips
             tips.append((t, p_BT.copy()))  # the caller may reuse its array
-            while len(tips) > 2 and t - tips[1][0] >= _HISTORY_S:
-                tips.popleft()
+            keep_span(tips, t, _HISTORY_S)
             steering = self._steered(axis)
         if c > p.contact_N:
             h0, h1, h2 = F_tilde.tolist()
@@ -274,18 +274,17 @@ class BreathFollower:
     ) -> None:
         """One tick of the surface's estimate in contact (module docstring): ṡ in `surface_m_s`."""
         p = self.params
-        a = axis
         if F_wrist_meas is None:
-            c_w, age = -float((F_tilde + F_probe).dot(a)), 0.0
+            c_w, age = -float((F_tilde + F_probe).dot(axis)), 0.0
         else:
-            c_w, age = -float(F_wrist_meas.dot(a)), ft_age
-        c_p = c if F_probe_meas is None else -float(F_probe_meas.dot(a))
+            c_w, age = -float(F_wrist_meas.dot(axis)), ft_age
+        c_p = c if F_probe_meas is None else -float(F_probe_meas.dot(axis))
         x = self._surface
         if x is None:  # the contact begins: the hand's share as it is now
             self.share_N = c_p - c_w
         else:
             self.share_N += (c_p - c_w - self.share_N) * min(1.0, dt / p.share_s)
-        z = -float(sample_at(self._tips, t - age - p.latency_s).dot(a))
+        z = -float(sample_at(self._tips, t - age - p.latency_s).dot(axis))
         m = z + (c_w + self.share_N) / p.stiffness_N_m
         if x is None:
             x = [m, 0.0, 0.0]

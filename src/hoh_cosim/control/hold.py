@@ -95,12 +95,12 @@ import enum
 import functools
 import math
 from collections import deque
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
+from hoh_cosim.control.history import keep_span, sample_at
 from hoh_cosim.control.release import scaled_norm
 from hoh_cosim.control.vectors import Vec, Vec3, as_nonnegative_vector, as_scalar, frozen
 from hoh_cosim.errors import ConfigError
@@ -111,7 +111,6 @@ __all__ = [
     "HoldEnd",
     "HoldParams",
     "HoldPhase",
-    "sample_at",
     "surface_filter_gain",
     "surface_observer_gain",
 ]
@@ -331,17 +330,6 @@ def surface_filter_gain(hz: float, dt: float) -> tuple[float, ...]:
     return _gain(1.0, 1.0, hz, float(dt))
 
 
-def sample_at(history: Sequence[tuple[float, Any]], when: float) -> Any:
-    """The value at time `when` from (time, value) samples in time order, linear between two; the
-    oldest value before them all. Values may be floats or arrays."""
-    t1, z1 = history[-1]
-    for t0, z0 in reversed(history):
-        if t0 <= when:
-            return z0 if t1 <= t0 else z0 + (z1 - z0) * (when - t0) / (t1 - t0)
-        t1, z1 = t0, z0
-    return history[0][1]
-
-
 @functools.lru_cache(maxsize=64)
 def _gain(noise_N: float, stiffness_N_m: float, hz: float, dt: float) -> tuple[float, ...]:
     from scipy.linalg import solve_discrete_are
@@ -552,8 +540,7 @@ class ContactHold:
         history = self._history
         turned = self._turned
         history.append((t, z - turned))
-        while len(history) > 2 and t - history[1][0] >= _HISTORY_S:
-            history.popleft()
+        keep_span(history, t, _HISTORY_S)
         return turned + sample_at(history, t - age - self.params.latency_s)
 
     def watch(

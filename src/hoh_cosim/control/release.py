@@ -70,6 +70,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from hoh_cosim.control.history import keep_span
 from hoh_cosim.control.vectors import Vec3, as_nonnegative_vector, as_scalar, frozen
 
 __all__ = ["ReleaseDetector", "ReleaseParams", "ReleasePhase", "scaled_norm"]
@@ -226,8 +227,7 @@ class ReleaseDetector:
         # previous tick's
         trend = self._trend
         trend.append((t, n))
-        while len(trend) > 2 and t - trend[1][0] >= p.trend_s - 1e-9:
-            trend.popleft()
+        keep_span(trend, t, p.trend_s - 1e-9)
         n_dot = n_dot_w = 0.0
         if len(trend) > 1:
             (t_old, n_old), (t_prev, n_prev) = trend[0], trend[-2]
