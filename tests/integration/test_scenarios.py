@@ -247,7 +247,7 @@ events:
         assert counter[t > 5.4][0] > counter[window][0]
         # the controller saw the stale sensor and stopped
         status = rec["controller.status"][:, 0].astype(int)
-        assert any(Status(s) & Status.STALE_FT for s in status[(t > 5.0) & (t < 5.4)])
+        assert any(Status(int(s)) & Status.STALE_FT for s in status[(t > 5.0) & (t < 5.4)])
         # the bias jump: the sensor's error on its x axis grows by 2.2 N
         error = rec["ft150.wrench_S"][:, 0] - rec["plant.wrench_S"][:, 0]
         jump = np.mean(error[(t > 6.1) & (t < 7.0)]) - np.mean(error[(t > 5.5) & (t < 6.0)])
