@@ -72,7 +72,9 @@ def test_a_quick_force_meets_the_lag_networks_gain_near_eq_10s_slope(f_hz):
 
 
 def test_at_rest_the_seeds_deadband_holds_and_in_motion_the_moving_one():
-    glide = Glide(GlideParams(enabled=True))
+    # (rest_s 0: the deadband is back at eq. 10's as soon as the push falls inside; the glide
+    # through a dip is the test below)
+    glide = Glide(GlideParams(enabled=True, rest_s=0.0))
     # a hand resting on the handle at 0.9 N (tremor, a sensor's error) moves nothing
     assert np.all(drive(glide, along_x(np.full(round(3.0 / DT), 0.9))) == 0.0)
     # a push of 1.2 N breaks away; eased to 0.5 N after 1 s it keeps the probe going (eq. 10
@@ -93,7 +95,7 @@ def test_at_rest_the_seeds_deadband_holds_and_in_motion_the_moving_one():
 
 
 def test_a_push_that_turns_breaks_away_again():
-    glide = Glide(GlideParams(enabled=True))
+    glide = Glide(GlideParams(enabled=True, rest_s=0.0))
     drive(glide, along_x(np.full(1000, 1.5)))
     # -0.6 N: beyond the moving deadband but the other way, and inside the seed's: no motion
     # back (after the forward part's decay)
@@ -103,6 +105,57 @@ def test_a_push_that_turns_breaks_away_again():
     # -1.1 N breaks away the other way, at eq. 10's deadband first
     turned = drive(glide, along_x(np.full(1, -1.1)))
     assert turned[0, 0] == pytest.approx(-0.0125 * (1.1 - 0.95), rel=0.02)
+
+
+def test_a_gliding_probe_keeps_the_moving_deadband_through_a_dip_and_a_turn():
+    def after_a_glide(rest_s: float) -> Glide:
+        glide = Glide(GlideParams(enabled=True, rest_s=rest_s))
+        # 1.5 N for 1 s: the probe breaks away and travels well past glide_travel_m (5 mm)
+        drive(glide, along_x(np.full(round(1.0 / DT), 1.5)))
+        assert glide.travel[0] > 0.005
+        # the push dips to 0.2 N for 0.6 s, inside the moving deadband: the probe stops
+        dip = drive(glide, along_x(np.full(round(0.6 / DT), 0.2)))
+        assert np.all(dip[-10:, 0] == 0.0)
+        return glide
+
+    gliding, resting = after_a_glide(1.0), after_a_glide(0.0)
+    # 0.5 N after the dip: the gliding probe goes on at once, at the moving deadband's slope...
+    eta = gliding.deadband[0] + (0.3 - gliding.deadband[0]) * (1.0 - math.exp(-DT / 0.5))
+    on = drive(gliding, along_x(np.full(round(1.0 / DT), 0.5)))
+    follow = 1.0 - math.exp(-2.0 * math.pi * 0.5 * DT)
+    assert eta < 0.35
+    assert on[0, 0] == pytest.approx(0.0125 * (0.5 - eta) * (1.0 + 2.2 * follow), rel=1e-9)
+    assert gliding.deadband[0] == pytest.approx(0.3, abs=0.01)
+    assert on[-1, 0] > 0.8 * 3.2 * 0.0125 * (0.5 - 0.3)
+    # ... where the probe at rest again must break away from eq. 10's 0.95 N first
+    assert np.all(drive(resting, along_x(np.full(round(1.0 / DT), 0.5))) == 0.0)
+    # the push turns to -0.6 N: the gliding probe comes back without breaking away (once the
+    # low-passed forward part has turned), the resting one does not move
+    back = drive(gliding, along_x(np.full(round(2.0 / DT), -0.6)))
+    assert back[-1, 0] == pytest.approx(-3.2 * 0.0125 * (0.6 - 0.3), rel=0.02)
+    assert np.all(drive(resting, along_x(np.full(round(2.0 / DT), -0.6))) == 0.0)
+
+
+def test_a_glide_rests_after_rest_s_and_a_short_push_never_glides():
+    glide = Glide(GlideParams(enabled=True))
+    drive(glide, along_x(np.full(round(1.0 / DT), 1.5)))
+    # the hand stops pushing: the command is under 1 mm/s 0.18 s later (the low-passed part's
+    # 50 ms decay from 4 cm/s), and rest_s (1 s) after that the probe is at rest again
+    drive(glide, along_x(np.zeros(round(1.0 / DT))))
+    assert glide.active
+    drive(glide, along_x(np.zeros(round(0.3 / DT))))
+    assert not glide.active
+    assert glide.travel[0] == 0.0
+    # and 0.9 N (a hand resting on the handle, a sensor's error) moves nothing
+    assert np.all(drive(glide, along_x(np.full(round(2.0 / DT), 0.9))) == 0.0)
+    # a push that breaks away but moves the probe less than glide_travel_m (a sensor's error
+    # across the probe that the hand holding its place stops): back to eq. 10's at its first dip
+    short = Glide(GlideParams(enabled=True))
+    moved = drive(short, along_x(np.full(round(0.3 / DT), 1.2)))
+    assert 0.0 < float(np.sum(moved[:, 0]) * DT) < 0.005
+    drive(short, along_x(np.full(round(0.6 / DT), 0.2)))
+    assert not short.active
+    assert np.all(drive(short, along_x(np.full(round(1.0 / DT), 0.5))) == 0.0)
 
 
 def test_the_travel_after_a_release_is_bounded_by_the_release_decay():

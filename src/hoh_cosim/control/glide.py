@@ -11,9 +11,13 @@ splits them by frequency, and the deadband by whether the probe already moves:
 
     η_i     the deadband on axis i: eq. 10's η_i at rest; once the push beyond it moves the probe,
             it approaches `moving_deadband` over `settle_s` while the push keeps its sign and
-            stays beyond it; back to η_i (at once) as soon as the push falls inside or turns.
-            Static and kinetic friction: breaking away asks for η, keeping going for less, so
-            the hand at rest on the handle (tremor, noise, the sensors' errors) still moves nothing
+            stays beyond it; back to η_i (at once) as soon as the push falls inside or turns,
+            unless the probe glides: once this push has moved it `glide_travel_m` along the
+            axis, the lower deadband stays while the push dips inside it or turns, either way,
+            until the command has stayed under `rest_speed_m_s` for `rest_s`. Static and kinetic
+            friction: breaking away asks for η, keeping going for less, so the hand at rest on
+            the handle (tremor, noise, the sensors' errors) still moves nothing, and a hand
+            steering a scan does not break away again at every dip of its push or at the turn
     u_i     = α_i (|F̃_i| - η_i)⁺ sgn F̃_i                (eq. 10 with that deadband)
     ū_i     u_i low-passed at `corner_hz`; while u_i = 0 it decays over `release_s` instead
     ẋ_i     = u_i + (r_i - 1) ū_i                        (r_i = `low_slope_ratio`)
@@ -31,7 +35,12 @@ the passivity controller (`hoh_cosim.control.passivity`, if on) watches the whol
 Why the moving deadband as well: the hand pays η_i at any slope, and η = 0.95 N alone is a quarter
 of a scan's freehand force; the 75 % effort target leaves the hand 0.9-1.0 N in all. At rest the
 deadband stays eq. 10's, so a view or a press, where the hand sits on the handle, sees the seed's
-law. Along the probe (z) the defaults leave the light part out (r = 1, the moving deadband the
+law. Why it stays while the probe glides: a hand that steers by where the probe goes lets its push
+dip as the probe catches up, and the lag's part carries the probe on a little; each dip inside the
+moving deadband used to cost the hand η again, and the scan's line turns twice (docs/decisions.md,
+"Glide keeps going"). The travel it needs first keeps a push that is only the sensors' error
+across the probe (the probe sensor's play, up to 0.8 N) from gliding: such a push moves the probe
+a millimetre or two before the hand holding its place stops it. Along the probe (z) the defaults leave the light part out (r = 1, the moving deadband the
 default η_z): a lighter law along the probe speeds up the hand's press loop, which its reaction
 delay leaves little phase for (docs/decisions.md).
 
@@ -98,6 +107,9 @@ class GlideParams:
         "corner_hz": "Hz",
         "moving_deadband": "N",
         "settle_s": "s",
+        "glide_travel_m": "m",
+        "rest_s": "s",
+        "rest_speed_m_s": "m/s",
         "release_s": "s",
         "quiet_ratio": "1",
         "quiet_hz": "Hz",
@@ -114,6 +126,12 @@ class GlideParams:
     # [N] the deadband once the probe moves (the smaller of this and eq. 10's η per axis)
     moving_deadband: Vec3 = field(default_factory=lambda: frozen([0.3, 0.3, 0.25]))
     settle_s: float = 0.5  # [s] the deadband's approach to moving_deadband while the push lasts
+    # the probe glides once the push has moved it this far along the axis: the moving deadband then
+    # stays through the push's dips and turns until the command rests under rest_speed_m_s for
+    # rest_s (0: back at eq. 10's deadband as soon as the push falls inside or turns)
+    glide_travel_m: float = 0.005
+    rest_s: float = 1.0
+    rest_speed_m_s: float = 0.001
     release_s: float = 0.05  # [s] the low-passed part's decay once eq. 10 commands nothing
     # q: in contact, the slope a quick push meets, in multiples of a steady push's (1: as it is)
     quiet_ratio: Vec3 = field(default_factory=lambda: frozen([1.0, 1.0, 1.0 / 3.0]))
@@ -137,9 +155,12 @@ class GlideParams:
             "moving_deadband",
             as_nonnegative_vector(self.moving_deadband, 3, "moving_deadband"),
         )
+        for name in ("glide_travel_m", "rest_s"):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         for name in (
             "corner_hz",
             "settle_s",
+            "rest_speed_m_s",
             "release_s",
             "quiet_hz",
             "contact_N",
@@ -162,6 +183,9 @@ class Glide:
     def reset(self) -> None:
         self.moving = np.zeros(3)  # the sign of the push that moves the probe, per axis; 0: at rest
         self.deadband = np.full(3, np.nan)  # η_i while moving
+        self.travel = np.zeros(3)  # [m] the command's path along each axis since it broke away
+        self.resting = np.zeros(3)  # [s] how long the command has stayed under rest_speed_m_s
+        self._command = np.zeros(3)  # the last tick's command before the quiet part
         self.slow = np.zeros(3)  # ū
         self.quiet = np.zeros(3)  # w̄
         self.quiet_in = 0.0  # a: the quiet part's blend since the contact began
@@ -182,11 +206,20 @@ class Glide:
         size = np.abs(F)
         sign = np.sign(F)
         low = np.minimum(p.moving_deadband, deadband)
-        going = (self.moving != 0.0) & (sign == self.moving) & (size > self.deadband)
+        moving = self.moving != 0.0
+        beyond = moving & (size > self.deadband)
+        going = beyond & (sign == self.moving)
+        self.resting = np.where(
+            moving & (np.abs(self._command) < p.rest_speed_m_s), self.resting + dt, 0.0
+        )
+        gliding = moving & (self.travel >= p.glide_travel_m) & (self.resting < p.rest_s)
+        keep = going | gliding
         settle = 1.0 - math.exp(-dt / p.settle_s)
-        self.deadband = np.where(going, self.deadband + (low - self.deadband) * settle, deadband)
-        starting = ~going & (size > deadband)
-        self.moving = np.where(going, self.moving, np.where(starting, sign, 0.0))
+        self.deadband = np.where(keep, self.deadband + (low - self.deadband) * settle, deadband)
+        starting = ~keep & (size > deadband)
+        self.moving = np.where(
+            keep, np.where(beyond, sign, self.moving), np.where(starting, sign, 0.0)
+        )
         u = deadband_linear(F, slope, self.deadband)
         follow = 1.0 - math.exp(-2.0 * math.pi * p.corner_hz * dt)
         decay = math.exp(-dt / p.release_s)
@@ -194,6 +227,8 @@ class Glide:
         fading[np.abs(fading) < _REST] = 0.0
         self.slow = np.where(u == 0.0, fading, self.slow + (u - self.slow) * follow)
         w = u + (p.low_slope_ratio - 1.0) * self.slow
+        self._command = w
+        self.travel = np.where(self.moving != 0.0, self.travel + np.abs(w) * dt, 0.0)
         quiet = self.quiet + (w - self.quiet) * (1.0 - math.exp(-2.0 * math.pi * p.quiet_hz * dt))
         quiet[(w == 0.0) & (np.abs(quiet) < _REST)] = 0.0
         self.quiet = quiet
