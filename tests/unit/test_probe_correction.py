@@ -160,6 +160,8 @@ def test_correction_parameters_refuse_what_cannot_work():
         ProbeCorrectionParams(network=[1.0, 2.0])
     with pytest.raises(ConfigError, match=r"at least 1 mm apart"):
         ProbeCorrectionParams(tip_S=[0, 0, -0.1], handle_S=[0, 0, -0.1])
+    with pytest.raises(ConfigError, match=r"across_from_wrist_s must be >= 0.0, got -1.0"):
+        ProbeCorrectionParams(across_from_wrist_s=-1.0)
 
 
 def _inputs(k: int, f_P: np.ndarray, R_SP: np.ndarray, rng) -> dict:
@@ -208,6 +210,74 @@ def test_estimator_holds_not_ready_through_the_probe_check_and_learns_in_it():
     assert out["F_probe_meas_P"][2] == pytest.approx(5.5, abs=0.1)
     assert est.correction.online is not None
     assert est.correction.online.updates == 99  # packets 6 to 104: k = 120, 140, ..., 2080
+
+
+def _contact_across_from_wrist(T: float, grip_N_m: float, seconds: float) -> dict:
+    """An estimator at `across_from_wrist_s` T after `seconds` of a hand pushing the handle (and
+    gripping it with a torque about x_S) while the tip presses a contact that the probe sensor
+    reads 0.8 N off across the axis (a play's frozen error); its last outputs."""
+    from hoh_cosim.control.gravity import ToolParams
+
+    params = EstimatorParams(
+        tool=ToolParams(mass_kg=0.0),
+        ft_rebias_packets=10,
+        probe_rebias_packets=5,
+        probe_correction=ProbeCorrectionParams(across_from_wrist_s=T),
+    )
+    est = Estimator(params)
+    pc = params.probe_correction
+    F_hand, F_contact = np.array([0.4, -0.3, -6.0]), np.array([1.0, -0.5, 8.0])
+    wrench = np.concatenate(
+        [
+            F_hand + F_contact,
+            skew(pc.handle_S) @ F_hand + skew(pc.tip_S) @ F_contact + [grip_N_m, 0.0, 0.0],
+        ]
+    )
+    probe_P = params.R_SP.T @ (F_contact + np.array([0.8, 0.0, 0.0]))
+    rng = np.random.default_rng(7)
+    ready_at = None
+    for k in range(1, round((0.2 + seconds) * 1000)):
+        loaded = k >= 200  # nothing on the tool for the rebias (0.1 s)
+        inputs = {
+            "wrench_S": (wrench if loaded else np.zeros(6))
+            + np.r_[rng.normal(0, 0.02, 3), rng.normal(0, 0.0005, 3)],
+            "ft_counter": np.array([float(k // 5)]),
+            "force_P": (probe_P if loaded else np.zeros(3)) + rng.normal(0, 0.02, 3),
+            "probe_counter": np.array([float(k // 20)]),
+            "R_BS": np.eye(3).reshape(9),
+        }
+        out = est.step(k * 1e-3, 1e-3, inputs)
+        if ready_at is None and out["ready"][0] > 0.5:
+            ready_at = k * 1e-3
+    assert ready_at is not None
+    assert ready_at < 0.2
+    return out
+
+
+@pytest.mark.parametrize("T", [2.0, 5.0])
+def test_the_probe_force_across_the_axis_takes_its_slow_part_from_the_wrist(T):
+    # the probe's 0.8 N across the axis goes as the mismatch's 0.5 s and then T's low-passes say
+    # (the estimator is ready before the loads come, 0.2 s in; they last T)
+    out = _contact_across_from_wrist(T, 0.0, T)
+    taken = 1.0 - (T * np.exp(-1.0) - 0.5 * np.exp(-T / 0.5)) / (T - 0.5)
+    error = out["F_probe_B"][0] - 1.0
+    assert error == pytest.approx(0.8 * (1.0 - taken), abs=0.04)
+    # long after: the contact across the axis is the wrist's, the probe's error gone ...
+    out = _contact_across_from_wrist(T, 0.0, 12.0 * T)
+    np.testing.assert_allclose(out["F_probe_B"], [1.0, -0.5, 8.0], atol=0.03)
+    # ... and its moment about R with it (eq. 12 takes that out of the torque)
+    p_RT = np.asarray(ProbeCorrectionParams().tip_S) - np.asarray(EstimatorParams().p_SR_S)
+    np.testing.assert_allclose(out["tau_probe_B"], skew(p_RT) @ out["F_probe_B"], atol=1e-9)
+
+
+def test_the_wrist_part_reads_the_grip_as_contact_and_is_off_when_zero():
+    # without it the probe's error stays whole
+    out = _contact_across_from_wrist(0.0, 0.0, 10.0)
+    assert out["F_probe_B"][0] - 1.0 == pytest.approx(0.8, abs=0.03)
+    # a grip's 0.02 N·m about x reads as the contact across the axis, τ_g × d / |d|²: 0.18 N
+    # along +y for d along -z, 0.11 m long (the handle to the tip)
+    out = _contact_across_from_wrist(2.0, 0.02, 30.0)
+    np.testing.assert_allclose(out["F_probe_B"][:2], [1.0, -0.5 + 0.02 / 0.11], atol=0.03)
 
 
 def test_probe_pushes_are_seeded_bounded_and_do_not_depend_on_the_step():

@@ -27,6 +27,15 @@ Seed 000, Fig. 5, per tick:
   controller holds the robot still), the hand is off the handle, someone presses the probe tip, and
   each probe packet is paired with the latest compensated wrist packet (the reference) for the
   online map. Once ready, the consistency check compares the two sensors across the probe's axis.
+- The contact across the axis from the wrist (`probe_correction.across_from_wrist_s` T > 0): the
+  consistency check's mismatch, the wrist's contact force across the axis (from its force and
+  torque, `probe_correction`'s docstring) less the probe's, low-passed over its 0.5 s, is
+  low-passed again over T and added to F̂_probe (and its moment to τ̂_probe). Across the axis the
+  probe force is then the probe's above about 1 / (2π T) and the wrist's below: the wrist has no
+  housing and no play, but the grip's own torque on the handle reads as contact force, τ_g / 0.11
+  m. The play (0.2-0.8 N per axis) leaves the probe's reading up to twice its width off wherever a
+  contact stops moving the housing, and the hand pays that error for as long as it lasts
+  (docs/decisions.md, "The play's error across the probe").
 
 Sign convention: each sensor reports the wrench that the tool side puts on it. The wrist sensor then
 reads hand + contact + weight, the probe sensor contact (+ the probe's weight if it hangs below it), so
@@ -432,6 +441,7 @@ class Estimator:
         self._R_SP = p.R_SP
         self._R_PS = p.R_SP.T.copy()
         self._drift_threshold_N = p.probe_correction.mismatch_threshold_N
+        self._across_s = p.probe_correction.across_from_wrist_s
         self.correction = ProbeCorrection(p.probe_correction)
         if self._kernel:
             self._consistency = KernelConsistency(p.probe_correction, p.p_SR_S)
@@ -475,6 +485,7 @@ class Estimator:
         self._consistency.reset()
         self._mismatch = 0.0
         self._mismatch_out = _FLAG[False]
+        self._across_S = np.zeros(3)  # the mismatch low-passed over across_from_wrist_s, in S
 
     def start_rebias(self) -> None:
         """Take the next N packets of each sensor as the new offset (nobody may touch the tool);
@@ -634,6 +645,8 @@ class Estimator:
             f0, f1, f2 = F_probe_B.tolist()
             tau_probe = np.array((r1 * f2 - r2 * f1, r2 * f0 - r0 * f2, r0 * f1 - r1 * f0))
             axis_B = _turned(R9, self._axis_S)
+        if self._across_s > 0.0 and use_probe:
+            F_probe_B, tau_probe = self._across_from_wrist(dt, R9, F_probe_B, tau_probe)
         return {
             "F_hand_B": in_B[0],
             "tau_hand_B": in_B[1],
@@ -654,6 +667,17 @@ class Estimator:
             "tau_probe_B": tau_probe,
             "probe_axis_B": axis_B,
         }
+
+    def _across_from_wrist(
+        self, dt: float, R9: Vec, F_probe_B: Vec3, tau_probe: Vec3
+    ) -> tuple[Vec3, Vec3]:
+        """F̂_probe and τ̂_probe with the wrist's part across the axis added (module docstring)."""
+        a = dt / (self._across_s + dt)
+        self._across_S = self._across_S + (self._consistency.mismatch_S - self._across_S) * a
+        l0, l1, l2 = lift = _turned_xyz(R9, self._across_S.tolist())
+        r0, r1, r2 = _turned_xyz(R9, self._p_RT_S)
+        moment = (r1 * l2 - r2 * l1, r2 * l0 - r0 * l2, r0 * l1 - r1 * l0)
+        return F_probe_B + np.array(lift), tau_probe + np.array(moment)
 
 
 def _turned_xyz(R9: Vec, v: list[float]) -> tuple[float, float, float]:

@@ -180,6 +180,7 @@ class ProbeCorrectionParams:
         "handle_S": "m",
         "mismatch_time_constant_s": "s",
         "mismatch_threshold_N": "N",
+        "across_from_wrist_s": "s",
     }
 
     kind: CorrectionKind = "none"
@@ -198,13 +199,16 @@ class ProbeCorrectionParams:
     handle_S: Vec3 = field(default_factory=lambda: HANDLE_S.copy())
     mismatch_time_constant_s: float = 0.5
     mismatch_threshold_N: float = 2.0  # the play a map without memory leaves, and the grip
+    # [s] the probe force across the axis takes its part slower than this from the wrist: the
+    # mismatch low-passed again over it is added (0: never; the estimator's docstring)
+    across_from_wrist_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in CORRECTION_KINDS:
             raise ConfigError(
                 f"kind: expected one of {', '.join(CORRECTION_KINDS)}, got {self.kind!r}"
             )
-        for name in ("check_s", "tracking_per_sqrt_s"):
+        for name in ("check_s", "tracking_per_sqrt_s", "across_from_wrist_s"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         for name in (
             "prior_linear",

@@ -278,14 +278,21 @@ FOLLOW_BREATH = (*PROBE_CHECK, "controller.follow.enabled=true")
 (`hoh_cosim.control.follow`): in contact, the axial contact force's departure from its level over
 about a breath moves the probe along its axis, so the hand no longer steers it up and down with
 every breath (docs/decisions.md, "Following the breath while the hand steers")."""
-GLIDE = (*FOLLOW_BREATH, "controller.glide.enabled=true")
+GLIDE = (
+    *FOLLOW_BREATH,
+    "controller.glide.enabled=true",
+    set_option("estimator.probe_correction.across_from_wrist_s", 5.0),
+)
 """The follow mode with glide (`hoh_cosim.control.glide`): eq. 10 light for a steady push (3.2
 times the slope under 0.5 Hz on the base's x and y, across the upright probe; the seed's slope
-above), and a 0.3 N deadband there once the probe moves, so that the hand steering a scan pays less
-than the seed's 0.95 N and the image meets the seed's slope; along z in contact, for a hand keeping
-the contact (a push under 1 N along it), a third of the seed's slope above 0.5 Hz, so that the image
-moves less along the beam (docs/decisions.md, "Glide" and "Glide quieter along the probe in
-contact")."""
+above), and a 0.3 N deadband there once the probe moves and while it glides, so that the hand
+steering a scan pays less than the seed's 0.95 N and the image meets the seed's slope; along z in
+contact, for a hand keeping the contact (a push under 1 N along it), a third of the seed's slope
+above 0.5 Hz, so that the image moves less along the beam. The probe force across the probe takes
+its part slower than 5 s from the wrist (`probe_correction.across_from_wrist_s`), so that the
+hand does not hold the probe against the housing's play (docs/decisions.md, "Glide", "Glide
+quieter along the probe in contact", "Glide keeps going" and "The play's error across the
+probe")."""
 
 
 @dataclass(frozen=True)
