@@ -485,7 +485,7 @@ class Estimator:
         self._consistency.reset()
         self._mismatch = 0.0
         self._mismatch_out = _FLAG[False]
-        self._across_S = np.zeros(3)  # the mismatch low-passed over across_from_wrist_s, in S
+        self._across_S = [0.0, 0.0, 0.0]  # the mismatch low-passed over across_from_wrist_s, in S
 
     def start_rebias(self) -> None:
         """Take the next N packets of each sensor as the new offset (nobody may touch the tool);
@@ -673,16 +673,24 @@ class Estimator:
     ) -> tuple[Vec3, Vec3]:
         """F̂_probe and τ̂_probe with the wrist's part across the axis added (module docstring)."""
         a = dt / (self._across_s + dt)
-        self._across_S = self._across_S + (self._consistency.mismatch_S - self._across_S) * a
-        l0, l1, l2 = lift = _turned_xyz(R9, self._across_S.tolist())
-        r0, r1, r2 = _turned_xyz(R9, self._p_RT_S)
+        m0, m1, m2 = self._consistency.mismatch_S.tolist()
+        o0, o1, o2 = self._across_S
+        self._across_S = across = [o0 + (m0 - o0) * a, o1 + (m1 - o1) * a, o2 + (m2 - o2) * a]
+        R = R9.tolist()
+        l0, l1, l2 = lift = _turned_xyz_list(R, across)
+        r0, r1, r2 = _turned_xyz_list(R, self._p_RT_S)
         moment = (r1 * l2 - r2 * l1, r2 * l0 - r0 * l2, r0 * l1 - r1 * l0)
         return F_probe_B + np.array(lift), tau_probe + np.array(moment)
 
 
 def _turned_xyz(R9: Vec, v: list[float]) -> tuple[float, float, float]:
     """R v for R given row by row (9 values) and v a float triple."""
-    a, b, c, d, e, f, g, h, i = R9.tolist()
+    return _turned_xyz_list(R9.tolist(), v)
+
+
+def _turned_xyz_list(R: list[float], v: list[float]) -> tuple[float, float, float]:
+    """`_turned_xyz` for R already as 9 floats."""
+    a, b, c, d, e, f, g, h, i = R
     x, y, z = v
     return a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z
 
