@@ -35,14 +35,18 @@ the passivity controller (`hoh_cosim.control.passivity`, if on) watches the whol
 Why the moving deadband as well: the hand pays η_i at any slope, and η = 0.95 N alone is a quarter
 of a scan's freehand force; the 75 % effort target leaves the hand 0.9-1.0 N in all. At rest the
 deadband stays eq. 10's, so a view or a press, where the hand sits on the handle, sees the seed's
-law. Why it stays while the probe glides: a hand that steers by where the probe goes lets its push
-dip as the probe catches up, and the lag's part carries the probe on a little; each dip inside the
+law.
+
+Why it stays while the probe glides: a hand that steers by where the probe goes lets its push dip
+as the probe catches up, and the lag's part carries the probe on a little; each dip inside the
 moving deadband used to cost the hand η again, and the scan's line turns twice (docs/decisions.md,
 "Glide keeps going"). The travel it needs first keeps a push that is only the sensors' error
-across the probe (the probe sensor's play, up to 0.8 N) from gliding: such a push moves the probe
-a millimetre or two before the hand holding its place stops it. Along the probe (z) the defaults leave the light part out (r = 1, the moving deadband the
-default η_z): a lighter law along the probe speeds up the hand's press loop, which its reaction
-delay leaves little phase for (docs/decisions.md).
+across the probe (the probe sensor's play, up to twice its 0.2-0.8 N) from gliding: such a push
+moves the probe a millimetre or two before the hand holding its place stops it.
+
+Along the probe (z) the defaults leave the light part out (r = 1, the moving deadband the default
+η_z): a lighter law along the probe speeds up the hand's press loop, which its reaction delay
+leaves little phase for (docs/decisions.md).
 
 Along the probe, in contact, glide is quieter instead: the image's jitter is the probe's motion
 along the beam above 2 Hz, which eq. 10 makes of F̃'s content there (the sensors' noise after
