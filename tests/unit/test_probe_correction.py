@@ -162,6 +162,8 @@ def test_correction_parameters_refuse_what_cannot_work():
         ProbeCorrectionParams(tip_S=[0, 0, -0.1], handle_S=[0, 0, -0.1])
     with pytest.raises(ConfigError, match=r"across_from_wrist_s must be >= 0.0, got -1.0"):
         ProbeCorrectionParams(across_from_wrist_s=-1.0)
+    with pytest.raises(ConfigError, match=r"across_within_N must be > 0.0, got 0.0"):
+        ProbeCorrectionParams(across_within_N=0.0)
 
 
 def _inputs(k: int, f_P: np.ndarray, R_SP: np.ndarray, rng) -> dict:
@@ -270,7 +272,7 @@ def test_the_probe_force_across_the_axis_takes_its_slow_part_from_the_wrist(T):
     np.testing.assert_allclose(out["tau_probe_B"], skew(p_RT) @ out["F_probe_B"], atol=1e-9)
 
 
-def test_the_wrist_part_reads_the_grip_as_contact_and_is_off_when_zero():
+def test_the_wrist_part_reads_a_grip_as_contact_but_not_a_twist_and_is_off_when_zero():
     # without it the probe's error stays whole
     out = _contact_across_from_wrist(0.0, 0.0, 10.0)
     assert out["F_probe_B"][0] - 1.0 == pytest.approx(0.8, abs=0.03)
@@ -278,6 +280,13 @@ def test_the_wrist_part_reads_the_grip_as_contact_and_is_off_when_zero():
     # along +y for d along -z, 0.11 m long (the handle to the tip)
     out = _contact_across_from_wrist(2.0, 0.02, 30.0)
     np.testing.assert_allclose(out["F_probe_B"][:2], [1.0, -0.5 + 0.02 / 0.11], atol=0.03)
+    # a hand twisting the handle to tilt the probe (0.35 N·m: 3.2 N across, with the play's 0.8
+    # N a mismatch beyond across_within_N) is not followed: the probe's reading stays, play and all
+    # (but for what the part took while the mismatch rose through 1.2 N), where following it would
+    # read +2.68 N along y
+    out = _contact_across_from_wrist(2.0, 0.35, 30.0)
+    np.testing.assert_allclose(out["F_probe_B"][:2], [1.8, -0.5], atol=0.08)
+    assert out["probe_mismatch"][0] > 1.2
 
 
 def test_probe_pushes_are_seeded_bounded_and_do_not_depend_on_the_step():

@@ -35,7 +35,11 @@ Seed 000, Fig. 5, per tick:
   housing and no play, but the grip's own torque on the handle reads as contact force, τ_g / 0.11
   m. The play (0.2-0.8 N per axis) leaves the probe's reading up to twice its width off wherever a
   contact stops moving the housing, and the hand pays that error for as long as it lasts
-  (docs/decisions.md, "The play's error across the probe").
+  (docs/decisions.md, "The play's error across the probe"). The second low-pass follows the
+  mismatch only while it is within `across_within_N` (1.2 N) and holds otherwise: a hand twisting
+  the handle to tilt the probe reads as a larger one (0.35 N·m, a tilt of 0.1 rad/s under the
+  rotation's default law, as 3.2 N), and followed, it would turn the hand's torque into a push
+  across the axis.
 
 Sign convention: each sensor reports the wrench that the tool side puts on it. The wrist sensor then
 reads hand + contact + weight, the probe sensor contact (+ the probe's weight if it hangs below it), so
@@ -442,6 +446,7 @@ class Estimator:
         self._R_PS = p.R_SP.T.copy()
         self._drift_threshold_N = p.probe_correction.mismatch_threshold_N
         self._across_s = p.probe_correction.across_from_wrist_s
+        self._across_within_sq = p.probe_correction.across_within_N**2
         self.correction = ProbeCorrection(p.probe_correction)
         if self._kernel:
             self._consistency = KernelConsistency(p.probe_correction, p.p_SR_S)
@@ -672,10 +677,12 @@ class Estimator:
         self, dt: float, R9: Vec, F_probe_B: Vec3, tau_probe: Vec3
     ) -> tuple[Vec3, Vec3]:
         """F̂_probe and τ̂_probe with the wrist's part across the axis added (module docstring)."""
-        a = dt / (self._across_s + dt)
         m0, m1, m2 = self._consistency.mismatch_S.tolist()
-        o0, o1, o2 = self._across_S
-        self._across_S = across = [o0 + (m0 - o0) * a, o1 + (m1 - o1) * a, o2 + (m2 - o2) * a]
+        across = self._across_S
+        if m0 * m0 + m1 * m1 + m2 * m2 <= self._across_within_sq:
+            a = dt / (self._across_s + dt)
+            o0, o1, o2 = across
+            self._across_S = across = [o0 + (m0 - o0) * a, o1 + (m1 - o1) * a, o2 + (m2 - o2) * a]
         R = R9.tolist()
         l0, l1, l2 = lift = _turned_xyz_list(R, across)
         r0, r1, r2 = _turned_xyz_list(R, self._p_RT_S)

@@ -181,6 +181,7 @@ class ProbeCorrectionParams:
         "mismatch_time_constant_s": "s",
         "mismatch_threshold_N": "N",
         "across_from_wrist_s": "s",
+        "across_within_N": "N",
     }
 
     kind: CorrectionKind = "none"
@@ -202,6 +203,10 @@ class ProbeCorrectionParams:
     # [s] the probe force across the axis takes its part slower than this from the wrist: the
     # mismatch low-passed again over it is added (0: never; the estimator's docstring)
     across_from_wrist_s: float = 0.0
+    # [N] ... and follows the mismatch only while it is within this: the play leaves the probe up to
+    # about twice its width off; a larger disagreement is a hand's torque on the handle (which the
+    # wrist cannot tell from a contact across the axis) or a fault, and the part holds meanwhile
+    across_within_N: float = 1.2
 
     def __post_init__(self) -> None:
         if self.kind not in CORRECTION_KINDS:
@@ -217,6 +222,7 @@ class ProbeCorrectionParams:
             "reference_sigma_N",
             "mismatch_time_constant_s",
             "mismatch_threshold_N",
+            "across_within_N",
         ):
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
