@@ -1,0 +1,157 @@
+"""Make `controller_reference.json` and `controller_reference.npz`: what the hand-guiding controller
+commanded, tick by tick, in every scenario that has one and in the clinical study's modes.
+
+    python tests/data/make_controller_reference.py            # writes both files
+    python tests/data/make_controller_reference.py --runs     # writes only the run list (JSON)
+
+The run list (`controller_reference.json`) is each run's scenario, `--set` overrides, seed and
+duration, written out literally so that the runs stay what they were whatever the project's code
+and presets become. The clinical study's runs are one operator's (the study's seed 1, operator 1),
+each mode's `--quick` task, with the overrides the study gave them when this file was made.
+
+The signals (`controller_reference.npz`), per run `NAME`: `NAME/twist_B` and `NAME/twist_law_B`
+(every controller tick), `NAME/status` and `NAME/brake_accel` (every controller tick) and
+`NAME/p_BT_B` (the plant's tip, every 20 ms). They were recorded in-process from main before the
+controller became a mode machine over stages (issue 51); `tests/unit/test_controller_equivalence.py`
+runs the same list and compares.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+RUNS = HERE / "controller_reference.json"
+SIGNALS = HERE / "controller_reference.npz"
+TIP_EVERY = 20  # master ticks between the tip's kept samples
+
+
+def _study_runs() -> list[dict]:
+    """The clinical study's runs of one operator (made from the study's code as it was)."""
+    from hoh_cosim.study.clinical import MODES, study_variants
+
+    wanted = {
+        ("transparency", "scan"),
+        ("checked", "press"),
+        ("hold", "view"),
+        ("hold", "press"),
+        ("follow", "scan"),
+        ("glide", "scan"),
+        ("glide", "view"),
+    }
+    out = []
+    for (_, task, mode), variant in study_variants(ROOT / "scenarios", 1, 1, True, MODES):
+        if (mode, task) in wanted:
+            out.append(
+                {
+                    "name": f"study_{mode}_{task}",
+                    "scenario": Path(variant.scenario).name,
+                    "overrides": list(variant.overrides),
+                    "seed": variant.seed,
+                    "duration_s": variant.duration_s,
+                }
+            )
+    hold_view = next(r for r in out if r["name"] == "study_hold_view")
+    # a hold allowed 4 mm only: its travel guard ends it, the robot rests, the hand takes over
+    out.append(
+        {
+            **hold_view,
+            "name": "study_hold_view_travel",
+            "overrides": [*hold_view["overrides"], "controller.hold.max_travel_m=0.004"],
+        }
+    )
+    return out
+
+
+def make_runs() -> list[dict]:
+    from hoh_cosim.cosim.scenario import load_scenario
+
+    runs = []
+    for path in sorted((ROOT / "scenarios").glob("*.yaml")):
+        scenario = load_scenario(path)
+        if scenario.component_of_kind("controller") is None:
+            continue
+        runs.append(
+            {
+                "name": path.stem,
+                "scenario": path.name,
+                "overrides": [],
+                "seed": None,
+                "duration_s": None,
+            }
+        )
+    # the release brake, the variable law, the passivity controller and the lead-lag filter
+    runs.append(
+        {
+            "name": "release_transparency",
+            "scenario": "release.yaml",
+            "overrides": [
+                "estimator.filter=lead_lowpass",
+                "controller.translation.law=variable",
+                "controller.release.enabled=true",
+                "controller.passivity.enabled=true",
+            ],
+            "seed": None,
+            "duration_s": None,
+        }
+    )
+    # the same laws in contact, with the fixture along the contact's normal
+    runs.append(
+        {
+            "name": "contact_scan_transparency",
+            "scenario": "contact_scan.yaml",
+            "overrides": [
+                *runs[-1]["overrides"],
+                "controller.virtual_fixture=true",
+                "controller.fixture_normal=contact",
+            ],
+            "seed": None,
+            "duration_s": None,
+        }
+    )
+    return runs + _study_runs()
+
+
+def record(run: dict) -> dict[str, np.ndarray]:
+    """One run's controller outputs at its own ticks, and the plant's tip."""
+    from hoh_cosim.cosim.engines import simulate
+    from hoh_cosim.cosim.scenario import load_scenario
+
+    scenario = load_scenario(
+        ROOT / "scenarios" / run["scenario"], run["overrides"], run["duration_s"], run["seed"]
+    )
+    every = scenario.components["controller"].every
+    rec = simulate(scenario, "inprocess", progress=False)
+    ticks = slice(every - 1, None, every)  # the controller's outputs, held from its step on
+    out = {
+        f"{run['name']}/{port}": np.array(rec[f"controller.{port}"][ticks])
+        for port in ("twist_B", "twist_law_B", "status", "brake_accel")
+    }
+    out[f"{run['name']}/p_BT_B"] = np.array(rec["plant.p_BT_B"][::TIP_EVERY])
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", action="store_true", help="write only the run list")
+    args = parser.parse_args(argv)
+    runs = make_runs()
+    RUNS.write_text(json.dumps(runs, indent=1) + "\n")
+    if args.runs:
+        return 0
+    arrays: dict[str, np.ndarray] = {}
+    for run in runs:
+        print(run["name"], file=sys.stderr, flush=True)
+        arrays.update(record(run))
+    np.savez_compressed(SIGNALS, **arrays)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
