@@ -66,6 +66,12 @@ def _study_runs() -> list[dict]:
             "overrides": [*hold_view["overrides"], "controller.hold.max_travel_m=0.004"],
         }
     )
+    # hold, glide and the follow together (never a study mode before the presets), letting go
+    glide = next(r for r in out if r["name"] == "study_glide_view")
+    extra = [o for o in glide["overrides"] if o not in hold_view["overrides"]]
+    for task in ("view", "press"):
+        base = next(r for r in out if r["name"] == f"study_hold_{task}")
+        out.append({**base, "name": f"study_all_{task}", "overrides": [*base["overrides"], *extra]})
     return out
 
 

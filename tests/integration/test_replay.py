@@ -223,7 +223,7 @@ def test_replay_with_contact_compensation_off_sets_only_that(log):
             "--set controller.nope: unknown parameter of ControllerParams (one of: translation, "
             "rotation, contact_compensation, contact_torque, virtual_fixture, fixture_threshold_N, "
             "fixture_up_B, fixture_normal, limits, release, variable, passivity, hold, follow, glide, "
-            "use_probe, ft_period_s, probe_period_s)",
+            "recovery, touch_down_N, lift_off_N, use_probe, ft_period_s, probe_period_s)",
         ),
         (
             "estimator.filter=median",

@@ -494,10 +494,10 @@ def test_controller_with_the_new_laws_matches_the_pure_controller(params, dt):
     """Both paths on the same estimates: releases, the watch's halvings, retuning, copies (an
     FMU's state) that carry on, and a reset; every output of every tick within 1e-12."""
     pure, compiled = _pure_and_compiled(lambda: HandGuidingController(params))
-    assert type(compiled._variable).__name__ == "KernelVariableAdmittance"
-    assert type(compiled._release).__name__ == "KernelReleaseDetector"
-    assert type(compiled._passivity).__name__ == "KernelPassivityController"
-    assert type(pure._variable) is VariableAdmittance
+    assert type(compiled._variable.law).__name__ == "KernelVariableAdmittance"
+    assert type(compiled.release).__name__ == "KernelReleaseDetector"
+    assert type(compiled._passivity.controller).__name__ == "KernelPassivityController"
+    assert type(pure._variable.law) is VariableAdmittance
     rng = np.random.default_rng(3)
     agree = Agreement()
     n = round(8.0 / dt)
@@ -526,11 +526,15 @@ def test_controller_with_the_new_laws_matches_the_pure_controller(params, dt):
         for name in a:
             agree.add(name, a[name], b[name])
         for name in ("factor", "stability", "swings", "oscillation_m_s"):
-            agree.add(name, getattr(pure._variable, name), getattr(compiled._variable, name))
-        agree.add("energy", pure._passivity.energy_J, compiled._passivity.energy_J)
+            agree.add(
+                name, getattr(pure._variable.law, name), getattr(compiled._variable.law, name)
+            )
+        agree.add(
+            "energy", pure._passivity.controller.energy_J, compiled._passivity.controller.energy_J
+        )
         assert pure.release.phase == compiled.release.phase
         flags |= int(a["status"][0])
-        stability = min(stability, pure._variable.stability)
+        stability = min(stability, pure._variable.law.stability)
     name, worst = agree.worst()
     assert worst < REL, f"{name}: {worst:.3g}"
     # the run did what it is meant to exercise
@@ -563,7 +567,7 @@ def test_a_wrong_law_kernel_would_be_caught():
     the pure one."""
     pure, compiled = _pure_and_compiled(lambda: HandGuidingController(_NEW_LAWS))
     compiled.step(0.0, 8e-3, controller_inputs())  # the gains are set at the first step
-    compiled._variable.constants[kernels._V_GAINS + 3] *= 1.0 + 1e-9
+    compiled._variable.law.constants[kernels._V_GAINS + 3] *= 1.0 + 1e-9
     pure.step(0.0, 8e-3, controller_inputs())
     rng = np.random.default_rng(3)
     agree = Agreement()

@@ -60,15 +60,15 @@ class Port:
 
     `unit` is one SI unit string for every element, or one per element (a wrench is N, N, N, N.m,
     N.m, N.m). Units are plain ASCII as FMI tools expect: 'N.m', 'm/s', 'rad/s', '1' for none.
-    `flags`: for a scalar bit field, the `enum.IntFlag` whose members name its bits (results show
-    them by name).
+    `flags`: for a scalar bit field, the `enum.IntFlag` whose members name its bits; for a scalar
+    that takes one of a few values, the `enum.IntEnum` that names them (results show them by name).
     """
 
     name: str
     size: int
     unit: str | tuple[str, ...]
     description: str
-    flags: type[enum.IntFlag] | None = None
+    flags: type[enum.IntFlag] | type[enum.IntEnum] | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.unit, tuple) and len(self.unit) != self.size:

@@ -472,6 +472,9 @@ class ContactHold:
         self._pushing_since: float | None = None
         self._still_since: float | None = None
         self._hand = HandShare(self.params)  # ĥ, the hand's share (force_source combined)
+        self._listening = False  # the retake listens this tick (the tick began holding)
+        self._touched_at: float | None = None  # the tick of a touch, on that tick
+        self._n = 0.0  # the touch's size this tick (`_touch`), for the line's following
 
     @property
     def active(self) -> bool:
@@ -595,10 +598,12 @@ class ContactHold:
         p_BT_B: Vec3,
         v_prev: Vec3,
         F_probe_meas_B: Vec3 | None = None,
+        keep_level: bool = False,
     ) -> None:
         """Begin a hold: the setpoint starts at the regulated force now and moves to the level
-        before it; the surface filter starts where the tip is, at its last commanded speed along
-        the axis (no step in the command)."""
+        before it (`keep_level`: the last hold's level, as after the contact's recovery); the
+        surface filter starts where the tip is, at its last commanded speed along the axis (no
+        step in the command)."""
         p = self.params
         self._axis = axis_B.copy()
         if F_meas_B is not None:  # ĥ starts at the two sensors' difference now: c = c_p
@@ -610,6 +615,8 @@ class ContactHold:
             self._hand.reset(-float(F_p.dot(axis_B)) - c_w)
         c, _ = self.regulated(F_meas_B, F_probe_B, axis_B, F_probe_meas_B)
         level = c if not self._window else self._window_sum / len(self._window)
+        if keep_level and self.holds:
+            level = self.target_N
         self.target_N = min(max(level, p.contact_N), p.max_force_N)
         self.setpoint_N = c
         self.force_N = c
@@ -786,13 +793,74 @@ class ContactHold:
             self._integral += e / k * dt
         return min(max(u, -limit), limit)
 
-    def step(
+    def guard(self, t: float, p_BT_B: Vec3, F_probe_B: Vec3) -> HoldEnd | None:
+        """The guards of an active hold, first on each of its ticks (module docstring): the
+        contact lost (`loss_N` for `loss_s`, or while the tip moved `loss_m`) or the tip
+        `max_travel_m` from where the hold began along its line end it (`ended` says why, and so
+        does the answer); None: it goes on."""
+        p = self.params
+        z = float(p_BT_B.dot(self._line))
+        if float(F_probe_B.dot(F_probe_B)) < p.loss_N * p.loss_N:
+            if self._lost_since is None:
+                self._lost_since, self._lost_at = t, z
+            elif t - self._lost_since >= p.loss_s - 1e-9 or abs(z - self._lost_at) >= p.loss_m:
+                self._end(HoldEnd.CONTACT_LOST)
+                return HoldEnd.CONTACT_LOST
+        else:
+            self._lost_since = None
+        if abs(z - self._p0) >= p.max_travel_m:
+            self._end(HoldEnd.TRAVEL)
+            return HoldEnd.TRAVEL
+        # the retake listens while the tick began holding (a touch this tick ends it after)
+        self._listening = self.phase == HoldPhase.HOLDING
+        self._touched_at = None
+        return None
+
+    def blended(self, t: float) -> bool:
+        """While handing back: β = (t - t_touch) / `blend_s`; True once the blend is over, and
+        the hold ended (HANDED_BACK): the law has the robot again."""
+        p = self.params
+        assert self._t_back is not None
+        beta = 1.0 if p.blend_s <= 0.0 else (t - self._t_back) / p.blend_s
+        if beta >= 1.0 - 1e-9:
+            self._end(HoldEnd.HANDED_BACK)
+            return True
+        self.blend = beta
+        return False
+
+    def touched(
+        self, t: float, dt: float, F: Vec3, F_raw: Vec3 | None, deadband: Vec3, F_probe_B: Vec3
+    ) -> bool:
+        """While holding: a touch of the handle (`_touch`), confirmed by the raw packet, firm or
+        lasting `confirm_s`; the band across the axis widened by the probe's own swing over the
+        last `swing_s` (`_swing`). On a touch the hand-back begins (BLENDING), or with no blend
+        (`blend_s` 0) the hold ends at once (HANDED_BACK). `F` and `F_raw` are the compensated
+        hand force, filtered and raw."""
+        p = self.params
+        a = self._axis
+        band = self._band(deadband)
+        if p.swing_s > 0.0:
+            band = band + self._swing(t, F_probe_B)
+        n = self._n = self._touch(dt, F, a, band, 0)
+        raw = F_raw is None or self._touch(dt, F_raw, a, band, 1) > 1.0
+        if n > 1.0 and raw:
+            if self._touch_since is None:
+                self._touch_since = t
+            if n > p.reengage_factor or t - self._touch_since >= p.confirm_s - 1e-9:
+                self.phase = HoldPhase.BLENDING
+                self._t_back = self._touched_at = t
+                if p.blend_s <= 0.0:
+                    self._end(HoldEnd.HANDED_BACK)
+                return True
+        else:
+            self._touch_since = None
+        return False
+
+    def command(
         self,
         t: float,
         dt: float,
         F: Vec3,
-        F_raw: Vec3 | None,
-        deadband: Vec3,
         F_meas_B: Vec3 | None,
         F_probe_B: Vec3,
         p_BT_B: Vec3,
@@ -800,66 +868,28 @@ class ContactHold:
         F_probe_meas_B: Vec3 | None = None,
         probe_age: float = 0.0,
         ft_age: float = 0.0,
-    ) -> Vec | None:
-        """One tick of an active hold: the linear velocity to command (the angular one is rest while
-        holding, β ω_law while handing back), or None when the hold has just ended (`ended` says
-        why; HANDED_BACK after the blend, when the law has the robot again). `F` and `F_raw` are
-        the compensated hand force, filtered and raw, `F_meas_B` the raw wrist packet (hand and
-        contact, uncompensated)."""
+    ) -> Vec:
+        """One tick of an active hold's force law, after its guards and its touch (`guard`,
+        `blended`, `touched`): the linear velocity to command. Holding, the law's; handing back,
+        (1 - β) v_hold + β `v_law` (the angular one is then β ω_law, rest while holding). `F` is the
+        compensated hand force, `F_meas_B` the raw wrist packet (hand and contact, uncompensated)."""
         p = self.params
         a = self._axis
         line = self._line
         z = float(p_BT_B.dot(line))
-        # guards: the contact lost, or the tip too far from where the hold began
-        if float(F_probe_B.dot(F_probe_B)) < p.loss_N * p.loss_N:
-            if self._lost_since is None:
-                self._lost_since, self._lost_at = t, z
-            elif t - self._lost_since >= p.loss_s - 1e-9 or abs(z - self._lost_at) >= p.loss_m:
-                self._end(HoldEnd.CONTACT_LOST)
-                return None
-        else:
-            self._lost_since = None
-        if abs(z - self._p0) >= p.max_travel_m:
-            self._end(HoldEnd.TRAVEL)
-            return None
-
         c, probe = self.regulated(F_meas_B, F_probe_B, a, F_probe_meas_B, t, dt)
         self.force_N = c
-        if p.retake_band_N > 0.0 and self.phase == HoldPhase.HOLDING:
+        if p.retake_band_N > 0.0 and self._listening:
             self._retake(t, float(F.dot(a)), -float(F_probe_B.dot(a)))
         age = (probe_age if probe else ft_age) + p.latency_s
         z_d = self._delayed(t, z, age - p.latency_s)
         v_hold = self._law(dt, c, z, z_d, age) * line
-
         if self.phase == HoldPhase.BLENDING:
-            assert self._t_back is not None
-            beta = 1.0 if p.blend_s <= 0.0 else (t - self._t_back) / p.blend_s
-            if beta >= 1.0 - 1e-9:
-                self._end(HoldEnd.HANDED_BACK)
-                return None
-            self.blend = beta
+            if self._touched_at == t:  # β = 0 on the touch's tick
+                return v_hold
             # v = (1 - β) v_hold + β v_law
+            beta = self.blend
             return (1.0 - beta) * v_hold + beta * v_law
-
-        # a touch of the handle (`_touch`), confirmed by the raw packet; the band across the axis
-        # widened by the probe's own swing over the last `swing_s` (`_swing`)
-        band = self._band(deadband)
-        if p.swing_s > 0.0:
-            band = band + self._swing(t, F_probe_B)
-        n = self._touch(dt, F, a, band, 0)
-        raw = F_raw is None or self._touch(dt, F_raw, a, band, 1) > 1.0
-        if n > 1.0 and raw:
-            if self._touch_since is None:
-                self._touch_since = t
-            if n > p.reengage_factor or t - self._touch_since >= p.confirm_s - 1e-9:
-                self.phase = HoldPhase.BLENDING
-                self._t_back = t
-                if p.blend_s <= 0.0:
-                    self._end(HoldEnd.HANDED_BACK)
-                    return None
-                return v_hold  # β = 0 on the touch's tick
-        else:
-            self._touch_since = None
         if p.motion == "normal" and F_meas_B is not None:
-            self._follow_normal(dt, n, F, F_meas_B, p_BT_B)
+            self._follow_normal(dt, self._n, F, F_meas_B, p_BT_B)
         return v_hold

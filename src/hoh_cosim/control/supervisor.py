@@ -97,6 +97,7 @@ class Status(enum.IntFlag):
     HOLDING = 1 << 13  # hold-on-release: the robot holds the probe's contact force
     HANDING_BACK = 1 << 14  # a touch of the handle: the law's command blended in
     FOLLOWING = 1 << 15  # in contact, the hand steering: the breath followed along the probe
+    RECOVERING = 1 << 16  # the contact was lost: the probe brought back along the last normal
 
     @property
     def ok(self) -> bool:
@@ -126,6 +127,7 @@ _DESCRIPTIONS = {
     Status.HOLDING: "hand released in contact: holding the contact force",
     Status.HANDING_BACK: "handing back to the hand",
     Status.FOLLOWING: "following the breath",
+    Status.RECOVERING: "recovering the contact",
     Status.BRAKING: "braking to rest",
     Status.PASSIVITY: "passivity controller acting",
     Status.FORCE_STOP: "probe force above the stop limit (latched)",

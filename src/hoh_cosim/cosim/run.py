@@ -89,8 +89,11 @@ def summary_of(
     )
 
 
-def flag_names(flags: type[enum.IntFlag], value: float) -> str:
-    """A bit field's set flags by name, `A|B` ("ok" when none is set)."""
+def flag_names(flags: type[enum.IntFlag] | type[enum.IntEnum], value: float) -> str:
+    """A bit field's set flags by name, `A|B` ("ok" when none is set); an enumeration's value by
+    its name."""
+    if not issubclass(flags, enum.IntFlag):
+        return flags(int(value)).name
     bits = int(value)
     return "|".join(f.name for f in flags if f.name and f.value & bits) or "ok"
 

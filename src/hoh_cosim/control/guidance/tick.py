@@ -1,0 +1,135 @@
+"""What the controller's detectors and stages share on one tick: the tick's inputs, read once
+(`Tick`), and the command the stages pass along and refine (`Command`), with the one interface of a
+stage (`Stage`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol
+
+import numpy as np
+
+from hoh_cosim.control.admittance import contact_compensated
+from hoh_cosim.control.vectors import Vec, Vec3, frozen
+
+__all__ = ["ZERO3", "Command", "Stage", "Tick"]
+
+ZERO3 = frozen(np.zeros(3))
+
+
+class Tick:
+    """One tick's inputs as the controller reads them; the detectors and the stages only read it.
+    On a tick with a stop flag only the time, the flags and the last command are read.
+
+    F, tau        F̃ and τ̃: the estimated hand force and torque, in B, with the contact's force
+                  and moment taken out (eq. 11-12) where contact compensation is on
+    F_raw         the newest unfiltered wrist packet, compensated the same way (None: not wired,
+                  or nothing reads it)
+    F_meas        ... as it came (hand and contact), or None
+    F_probe       the contact force's estimate in B; `probe` the same, or None without a probe
+                  sensor (no compensation, fixture, force limits or hold then)
+    F_probe_meas  the probe sensor's newest corrected packet in B, or None
+    axis          the probe's axis in B (handle to tip), or None
+    p_BT          the measured tip position in B
+    ft_age, probe_age   [s] since each sensor's newest packet
+    status        the supervisor's stop flags of this tick (`hoh_cosim.control.supervisor`)
+    v_last, w_last      the twist the controller commanded on its last tick
+    request       the hand's request: the law's twist [v; ω] (set once the law has run)
+    """
+
+    __slots__ = (
+        "F",
+        "F_meas",
+        "F_probe",
+        "F_probe_meas",
+        "F_raw",
+        "axis",
+        "dt",
+        "ft_age",
+        "p_BT",
+        "probe",
+        "probe_age",
+        "request",
+        "status",
+        "t",
+        "tau",
+        "v_last",
+        "w_last",
+    )
+
+    def __init__(self) -> None:
+        self.start(0.0, 0.0, 1, (ZERO3, ZERO3), {}, (False, False, False, False))
+
+    def start(
+        self,
+        t: float,
+        dt: float,
+        status: int,
+        last: tuple[Vec3, Vec3],
+        inputs: Mapping[str, Vec],
+        reading: tuple[bool, bool, bool, bool],
+    ) -> None:
+        """A new tick (one object serves every tick of a controller). Its forces only without a
+        stop flag (a stop's inputs may be non-finite); `reading`: contact compensation, the
+        contact's torque, a probe sensor, and the compensated raw packet (which only the release
+        detector and the hold read)."""
+        self.t, self.dt, self.status = t, dt, status
+        self.v_last, self.w_last = last
+        self.request = _ZERO6
+        if status:
+            return
+        compensated, contact_torque, use_probe, raw = reading
+        F_probe = inputs["F_probe_B"]
+        F, tau = inputs["F_hand_B"], inputs["tau_hand_B"]
+        F_meas = inputs.get("F_hand_meas_B")
+        F_raw = F_meas if raw else None
+        if compensated:
+            F = contact_compensated(F, F_probe)
+            tau_probe = inputs.get("tau_probe_B")
+            if contact_torque and tau_probe is not None:
+                # τ̃ = τ_hand - p_RT × F_probe: the contact's moment is not the hand's
+                tau = tau - tau_probe
+            if F_raw is not None:
+                F_raw = contact_compensated(F_raw, F_probe)
+        self.F, self.tau, self.F_raw, self.F_meas = F, tau, F_raw, F_meas
+        self.F_probe = F_probe
+        self.probe = F_probe if use_probe else None
+        self.F_probe_meas = inputs.get("F_probe_meas_B")
+        self.axis = inputs.get("probe_axis_B")
+        self.p_BT = inputs["p_BT_B"]
+        self.ft_age = float(inputs["ft_age"][0])
+        self.probe_age = float(inputs["probe_age"][0])
+
+
+_ZERO6 = frozen(np.zeros(6))
+
+
+class Command:
+    """The command the stages pass along and refine: the linear and angular velocity [m/s, rad/s]
+    in B, the law's own twist (`twist_law_B`), the status flags so far, whether it is the hand's
+    request (`steering`: the mode steers by it) and whether the robot brakes to rest after a
+    release (speedL's deceleration, the supervisor's braking clamp)."""
+
+    __slots__ = ("braking", "law", "status", "steering", "v", "w")
+
+    def __init__(self) -> None:
+        self.start(0)
+
+    def start(self, status: int) -> None:
+        """Rest, with the tick's stop flags (one object serves every tick of a controller)."""
+        self.v = self.w = ZERO3
+        self.law = _ZERO6
+        self.status = status
+        self.steering = self.braking = False
+
+
+class Stage(Protocol):
+    """One feature of the controller: it knows nothing of the others.
+
+    `step` refines the command of this tick (it may return the same object); `reset` forgets
+    everything (a stop, the controller's reset); `rest` is called on a tick whose mode does not
+    run it, for a stage that keeps state it must not carry over (glide's, the follow's)."""
+
+    def reset(self) -> None: ...
+
+    def step(self, tick: Tick, command: Command) -> Command: ...
