@@ -26,6 +26,7 @@ TOP_KEYS = (
     "ft150",
     "probe",
     "calibration",
+    "preset",
     "rebias",
     "estimator",
     "controller",

@@ -2,20 +2,24 @@
 
 hoh-cosim SCENARIO.yaml [--out DIR] [--engine fmu|inprocess|libcosim|ecos] [--duration S]
                         [--coupling gauss-seidel|jacobi|jacobi-eager] [--seed N]
-                        [--set component.parameter=value ...]
+                        [--preset NAME|FILE] [--set component.parameter=value ...]
 hoh-cosim build-fmus [--out DIR]
-hoh-cosim export SCENARIO.yaml --out DIR [--duration S] [--seed N] [--set ...]
+hoh-cosim export SCENARIO.yaml --out DIR [--duration S] [--seed N] [--preset NAME|FILE] [--set ...]
+hoh-cosim presets [NAME|FILE] [--json]
 hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import shlex
 import sys
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from hoh_cosim.commands import ArgumentParser, add_set_option
 from hoh_cosim.cosim import COUPLINGS, ENGINE_COUPLING, ENGINES, EXTERNAL_ENGINES
@@ -24,7 +28,7 @@ from hoh_cosim.results import FORMATS
 
 __all__ = ["COMMANDS", "add_commands", "run_command", "run_scenario_command"]
 
-COMMANDS = ("build-fmus", "export", "identify-gravity")
+COMMANDS = ("build-fmus", "export", "identify-gravity", "presets")
 
 
 def _gravity(text: str) -> list[float]:
@@ -40,8 +44,24 @@ def _gravity(text: str) -> list[float]:
     return values
 
 
+def add_preset_option(parser: argparse.ArgumentParser, default: str) -> None:
+    """--preset NAME|FILE: the estimator's and the controller's parameters (hoh_cosim.presets)."""
+    from hoh_cosim.presets import preset_names
+
+    parser.add_argument(
+        "--preset",
+        metavar="NAME|FILE",
+        help=f"the estimator's and the controller's preset: {', '.join(preset_names())}, or a "
+        f"preset file; --set changes it further (default: {default}; 'hoh-cosim presets' "
+        "lists them)",
+    )
+
+
 def add_scenario_options(parser: argparse.ArgumentParser) -> None:
-    """--duration, --seed and --set: what changes a scenario as it is loaded."""
+    """--preset, --duration, --seed and --set: what changes a scenario as it is loaded."""
+    from hoh_cosim.presets import DEFAULT_PRESET
+
+    add_preset_option(parser, f"the scenario's preset, else {DEFAULT_PRESET}")
     parser.add_argument(
         "--duration",
         type=float,
@@ -92,6 +112,20 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     export.add_argument("scenario", metavar="SCENARIO.yaml", help="the scenario to export")
     export.add_argument("--out", required=True, metavar="DIR", help="the export directory")
     add_scenario_options(export)
+
+    presets = sub.add_parser(
+        "presets",
+        help="list the presets, with their measured figures",
+        description=(
+            "List the presets (a named set of the estimator's and the controller's parameters and "
+            "the session steps they need, chosen with --preset NAME), one line each with its "
+            "measured figures; with NAME or FILE, every value it sets."
+        ),
+    )
+    presets.add_argument(
+        "preset", nargs="?", metavar="NAME|FILE", help="show this preset's values in full"
+    )
+    presets.add_argument("--json", action="store_true", help="one JSON object on stdout")
 
     ident = sub.add_parser(
         "identify-gravity",
@@ -202,6 +236,7 @@ def run_scenario_command(argv: Sequence[str], others: Sequence[str]) -> int:
         overrides=args.overrides,
         progress=not args.quiet,
         fmt=args.format,
+        preset=args.preset,
     )
     for note in result.report.notes:
         print(f"hoh-cosim: note: {note}", file=sys.stderr)
@@ -210,7 +245,8 @@ def run_scenario_command(argv: Sequence[str], others: Sequence[str]) -> int:
         m = s["metrics"]
         print(
             f"{s['scenario']}: {s['duration_s']:g} s simulated in {m['wall_s']:.2f} s "
-            f"({_metric_text(m['realtime_factor'])}x real time, engine {s['engine']}, seed {s['seed']})"
+            f"({_metric_text(m['realtime_factor'])}x real time, engine {s['engine']}, seed {s['seed']}"
+            + (f", preset {s['preset']})" if s["preset"] else ")")
         )
         width = max(len(k) for k in s["metrics"])
         for key, value in s["metrics"].items():
@@ -298,8 +334,60 @@ def _identify_gravity(args: argparse.Namespace) -> int:
     return 0
 
 
+def _presets(args: argparse.Namespace) -> int:
+    from hoh_cosim.presets import figure_lines, load_figures, load_preset, preset_names
+
+    figures = load_figures()
+    if args.preset is not None:
+        preset = load_preset(args.preset)
+        if args.json:
+            print(json.dumps(_preset_json(preset, figures), indent=1))
+            return 0
+        print(f"{preset.label}: {preset.description}")
+        if preset.probe_check_s:
+            print(f"  session: a probe check of {preset.probe_check_s:g} s at the start")
+        for name, value in preset.changes().items():
+            print(f"  {name} = {value}")
+        for line in figure_lines(figures.get(preset.name)):
+            print(f"  measured: {line}")
+        return 0
+    chosen = [load_preset(name) for name in preset_names()]
+    if args.json:
+        print(json.dumps({p.name: _preset_json(p, figures) for p in chosen}, indent=1))
+        return 0
+    width = max(len(p.name) for p in chosen)
+    indent = " " * (width + 2)
+    for preset in chosen:
+        text = textwrap.fill(
+            preset.description,
+            100,
+            initial_indent=f"{preset.name:<{width}}  ",
+            subsequent_indent=indent,
+        )
+        print(text)
+        for line in figure_lines(figures.get(preset.name)) or ["not measured yet"]:
+            print(textwrap.fill(line, 100, initial_indent=indent, subsequent_indent=indent + "  "))
+    source = figures.get("_measured_by")
+    if source:
+        print(f"measured by: {source}")
+    return 0
+
+
+def _preset_json(preset: Any, figures: dict[str, Any]) -> dict[str, Any]:
+    return {
+        "name": preset.name,
+        "description": preset.description,
+        "file": str(preset.path),
+        "probe_check_s": preset.probe_check_s,
+        "changes": preset.changes(),
+        "figures": figures.get(preset.name),
+    }
+
+
 def run_command(args: argparse.Namespace) -> int | None:
     """Run a co-simulation command if `args` names one; None otherwise."""
+    if args.command == "presets":
+        return _presets(args)
     if args.command == "identify-gravity":
         return _identify_gravity(args)
     if args.command == "build-fmus":

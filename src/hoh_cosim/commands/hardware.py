@@ -1,13 +1,14 @@
 """The hardware commands of `hoh-cosim`:
 
-    hoh-cosim hw run CONFIG.yaml [--seconds S] [--log FILE] [--set block.parameter=value ...]
+    hoh-cosim hw run CONFIG.yaml [--seconds S] [--log FILE] [--preset NAME|FILE]
+                                 [--set block.parameter=value ...]
     hoh-cosim hw calibrate CONFIG.yaml [--out FILE] [--samples N] [--tilts N] [--directions N]
     hoh-cosim hw sensors [--ft HOST[:PORT]] [--probe DEVICE] [--seconds S] [--json]
     hoh-cosim hw rehearse [--seconds S] [--task TASK] [--rate HZ] [--fault KIND@SECONDS ...]
-                          [--breathing MM] [--let-go S+D]
+                          [--breathing MM] [--let-go S+D] [--preset NAME|FILE]
     hoh-cosim hw emulate [--host 127.0.0.1] [--series e|cb3] [--seconds N] [--allow-remote]
     hoh-cosim hw campaign [--runs N] [--seed S] [--workers W] [--out DIR] [--kinds K,K,...]
-    hoh-cosim replay LOG.mcap [--set block.parameter=value ...] [--out DIR]
+    hoh-cosim replay LOG.mcap [--preset NAME|FILE] [--set block.parameter=value ...] [--out DIR]
 
 Exit status as everywhere: 0 done, 2 the input is wrong, 1 the session ended on a fault.
 """
@@ -105,6 +106,12 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_preset(parser: argparse.ArgumentParser, default: str) -> None:
+    from hoh_cosim.commands.cosim import add_preset_option
+
+    add_preset_option(parser, default)
+
+
 def _add_block_overrides(parser: argparse.ArgumentParser) -> None:
     add_set_option(
         parser,
@@ -136,6 +143,7 @@ def add_commands(sub: Any) -> None:
         metavar="FILE",
         help="the session log (default: in the config's log_dir, named by date and time)",
     )
+    _add_preset(run, "the config's preset, else " + _default_preset())
     _add_block_overrides(run)
 
     cal = hw_sub.add_parser(
@@ -279,6 +287,7 @@ def add_commands(sub: Any) -> None:
         ),
     )
     _add_rt_priority(rehearse, "the loop")
+    _add_preset(rehearse, _default_preset())
     rehearse.add_argument(
         "--set",
         dest="overrides",
@@ -394,10 +403,17 @@ def add_commands(sub: Any) -> None:
         "controller with other settings; plot recorded against replayed.",
     )
     rep.add_argument("log", metavar="LOG.mcap", help="a session log of hw run or hw rehearse")
+    _add_preset(rep, "the session's own parameters")
     _add_block_overrides(rep)
     rep.add_argument(
         "--out", metavar="DIR", help="the results directory (default: runs/replay-<log name>)"
     )
+
+
+def _default_preset() -> str:
+    from hoh_cosim.presets import DEFAULT_PRESET
+
+    return DEFAULT_PRESET
 
 
 def _stamp() -> str:
@@ -421,7 +437,7 @@ def _hw_run(args: argparse.Namespace) -> int:
     from hoh_cosim.hardware.ft150 import zero_sensor
     from hoh_cosim.hardware.isolation import in_child
 
-    config = load_config(args.config, args.overrides)
+    config = load_config(args.config, args.overrides, args.preset)
     if config.calibration is None:
         raise ConfigError(f"{config.path}: calibration: missing (run 'hoh-cosim hw calibrate')")
     calibration = read_calibration(config.calibration)
@@ -541,16 +557,12 @@ def _hw_sensors(args: argparse.Namespace) -> int:
     return 1 if silent else 0
 
 
-def _rehearsal_params(overrides: list[str]) -> tuple[Any, Any]:
-    """The estimator's and controller's parameters with `--set` overrides (None: the defaults)."""
-    if not overrides:
-        return None, None
-    from hoh_cosim.control.controller import ControllerParams
-    from hoh_cosim.control.estimator import EstimatorParams
+def _rehearsal_params(overrides: list[str], preset: Any) -> tuple[Any, Any]:
+    """The estimator's and controller's parameters: the preset's, with `--set` overrides."""
     from hoh_cosim.hardware.config import with_overrides
 
     params = with_overrides(
-        {"estimator": EstimatorParams(), "controller": ControllerParams()}, overrides
+        {"estimator": preset.estimator, "controller": preset.controller}, overrides
     )
     return params["estimator"], params["controller"]
 
@@ -570,8 +582,11 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         )
     if not 0.0 <= args.breathing <= 30.0:
         raise ConfigError(f"--breathing: expected millimetres from 0 to 30, got {args.breathing:g}")
+    from hoh_cosim.presets import DEFAULT_PRESET, load_preset
+
     let_go, retake = args.let_go or (0.0, 0.0)
-    estimator, controller = _rehearsal_params(args.overrides)
+    preset = load_preset(args.preset or DEFAULT_PRESET)
+    estimator, controller = _rehearsal_params(args.overrides, preset)
     setup = Rehearsal(
         seconds=args.seconds,
         log_path=log_path,
@@ -587,6 +602,7 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         ur_host=args.ur_emulator,
         estimator=estimator,
         controller=controller,
+        preset=preset,
     )
     result = rehearse(setup, announce=_announce)
     print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
@@ -720,7 +736,7 @@ def _replay(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path("runs") / f"replay-{Path(args.log).stem}"
     check_out_dir(out, marker="replay.json", what="replay")
-    result = replay(args.log, args.overrides)
+    result = replay(args.log, args.overrides, args.preset)
     summary = result.summary()
     png = plot_replay(result)
 

@@ -3,8 +3,8 @@
     DIR/signals.parquet time and every recorded signal, one column per element (component.port[i]),
                         and a bit field's flags by name beside it (controller.status_text);
                         DIR/signals.csv with --format csv, the same columns
-    DIR/summary.json    scenario, engine, seed, duration, metrics (with wall time and real-time
-                        factor), notes
+    DIR/summary.json    scenario, engine, seed, duration, the preset and every value that differs
+                        from it, metrics (with wall time and real-time factor), notes
     DIR/*.png           the scenario's plots
     DIR/...             whatever else the metric set produces (poses.csv, calibration.json)
 
@@ -82,6 +82,10 @@ def summary_of(
             "duration_s": scenario.duration_s,
             "dt_s": scenario.dt_s,
             "overrides": list(overrides),
+            # the preset, and every value of the estimator's and the controller's parameters
+            # that differs from it (the scenario's own and --set)
+            "preset": None if scenario.preset is None else scenario.preset.label,
+            "preset_changes": scenario.preset_changes(),
             "metrics": report.metrics,  # with the run's wall_s and realtime_factor
             "notes": report.notes,
             "hoh_cosim_version": __version__,
@@ -195,12 +199,14 @@ def run_scenario(
     progress: bool = True,
     plots: bool = True,
     fmt: str = "parquet",
+    preset: str | None = None,
 ) -> RunResult:
     """Load, run, measure and write one scenario; `out` defaults to runs/<scenario name>, the
-    signals as `fmt` ("parquet" or "csv")."""
+    signals as `fmt` ("parquet" or "csv"), `preset` the estimator's and the controller's
+    (`hoh_cosim.presets`; default: the scenario's)."""
     if fmt not in FORMATS:
         raise ConfigError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
-    scenario = load_scenario(path, overrides, duration_s, seed)
+    scenario = load_scenario(path, overrides, duration_s, seed, preset)
     out_dir = Path(out) if out is not None else Path("runs") / scenario.name
     check_out_dir(out_dir)
     rec = simulate(scenario, engine, progress=progress, coupling=coupling)

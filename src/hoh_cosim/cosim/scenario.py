@@ -4,6 +4,8 @@
                                      # mappings merge key by key, lists and values replace
     name: circles
     description: the operator draws circles in the air (seed Fig. 20, 21)
+    preset: seed                     # the estimator's and the controller's parameters before the
+                                     # file's own (hoh_cosim.presets; default: DEFAULT_PRESET)
     duration_s: 30.0
     dt_s: 0.001                      # the master's tick
     seed: 7                          # every random source derives from it
@@ -46,6 +48,7 @@ from hoh_cosim.control.cycle import SensorSetup
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.kinds import KINDS, ComponentKind, input_starts
 from hoh_cosim.params import from_mapping, leaves, override
+from hoh_cosim.presets import BLOCKS, DEFAULT_PRESET, Preset, changed_from, load_preset
 from hoh_cosim.yamlfile import Where, parse_value, read_yaml
 
 __all__ = [
@@ -82,6 +85,7 @@ _TOP_KEYS = (
     "extends",
     "name",
     "description",
+    "preset",
     "duration_s",
     "dt_s",
     "seed",
@@ -154,6 +158,19 @@ class Scenario:
     events: tuple[Event, ...]
     record: tuple[str, ...]  # "component.port"
     record_every: int = 1  # signals.csv keeps every n-th tick (the metrics use them all)
+    preset: Preset | None = None  # the estimator's and the controller's preset (None: neither)
+
+    def preset_changes(self) -> dict[str, Any]:
+        """Every value of the estimator's and the controller's parameters that differs from the
+        preset (the file's own and `--set`), as `component.leaf` names."""
+        if self.preset is None:
+            return {}
+        return {
+            f"{c.name}.{name}": value
+            for c in self.components.values()
+            if c.kind.name in BLOCKS
+            for name, value in changed_from(self.preset.params[c.kind.name], c.params).items()
+        }
 
     @property
     def n_ticks(self) -> int:
@@ -200,7 +217,9 @@ def parse_endpoint(
     return name, port, (i - 1,)
 
 
-def _component(name: str, raw: Any, seed: int, w: Where) -> ComponentSpec:
+def _component(
+    name: str, raw: Any, seed: int, w: Where, preset: Preset | None = None
+) -> ComponentSpec:
     where = f"components.{name}"
     raw = w.mapping(raw if raw is not None else {}, _COMPONENT_KEYS, where)
     kind_name = raw.get("kind", name)
@@ -211,8 +230,9 @@ def _component(name: str, raw: Any, seed: int, w: Where) -> ComponentSpec:
         )
     kind = KINDS[kind_name]
     every = w.integer(raw.get("every", 1), f"{where}.every", low=1)
+    base = preset.params[kind_name] if preset is not None and kind_name in BLOCKS else kind.params()
     try:
-        params = from_mapping(kind.params(), raw.get("params") or {}, f"{where}.params")
+        params = from_mapping(base, raw.get("params") or {}, f"{where}.params")
     except ConfigError as exc:
         raise ConfigError(f"{w.file}: {exc}") from None
     fmu = None
@@ -260,8 +280,13 @@ def load_scenario(
     overrides: Sequence[str] = (),
     duration_s: float | None = None,
     seed: int | None = None,
+    preset: str | Path | None = None,
 ) -> Scenario:
-    """Read and check a scenario; `overrides` are `component.path=value` strings (`--set`)."""
+    """Read and check a scenario; `overrides` are `component.path=value` strings (`--set`),
+    `preset` a preset's name or file (`--preset`; default: the file's `preset`, else
+    `hoh_cosim.presets.DEFAULT_PRESET`), applied to the estimator and the controller before the
+    file's own parameters, with its session steps (the probe check: the hand's pushes before its
+    task, which starts and ends that much later)."""
     path = Path(path)
     w = Where(path)
     raw = _read_raw(path, ())
@@ -294,7 +319,10 @@ def load_scenario(
     raw_components = w.mapping(components_raw, names, "components")
     if not raw_components:
         raise w.error("components", "expected at least one component")
-    components = {n: _component(n, c, scenario_seed, w) for n, c in raw_components.items()}
+    chosen = _preset(raw, preset, raw_components, w)
+    components = {n: _component(n, c, scenario_seed, w, chosen) for n, c in raw_components.items()}
+    if chosen is not None and chosen.probe_check_s > 0.0:
+        duration += _probe_check(components, chosen.probe_check_s, duration_s is None)
     kinds = {c.kind.name for c in components.values()}
     for needed in METRIC_SETS[metrics]:
         alternatives = (needed,) if isinstance(needed, str) else needed
@@ -366,7 +394,42 @@ def load_scenario(
         tuple(events),
         tuple(record),
         record_every,
+        chosen,
     )
+
+
+def _preset(
+    raw: Mapping[str, Any], preset: str | Path | None, components: Mapping[str, Any], w: Where
+) -> Preset | None:
+    """The scenario's preset: `--preset`, else the file's, else the default; None when no
+    component is an estimator or a controller (nothing to apply it to)."""
+    name: Any = preset
+    if name is None:
+        name = raw.get("preset", DEFAULT_PRESET)
+        if not isinstance(name, str) or not name:
+            raise w.error("preset", f"expected a preset's name or a file's path, got {name!r}")
+        if name.endswith((".yaml", ".yml")) or "/" in name:
+            name = Path(w.file).parent / name
+    chosen = load_preset(name)
+    kinds = [c.get("kind", n) if isinstance(c, Mapping) else n for n, c in components.items()]
+    return chosen if any(isinstance(k, str) and k in BLOCKS for k in kinds) else None
+
+
+def _probe_check(components: dict[str, ComponentSpec], check_s: float, longer: bool) -> float:
+    """The preset's probe check in a co-simulation: the hand pushes the probe's tip for
+    `check_s` before its task (`plant_models.operator`), which starts that much later; the run's
+    extra length (when `longer`: no `--duration`). A scenario whose hand already checks the probe
+    keeps its own check."""
+    extra = 0.0
+    for name, spec in components.items():
+        if spec.kind.name != "operator" or spec.params.probe_check_s > 0.0:
+            continue
+        params = dataclasses.replace(
+            spec.params, probe_check_s=check_s, start_s=spec.params.start_s + check_s
+        )
+        components[name] = dataclasses.replace(spec, params=params)
+        extra = check_s if longer else 0.0
+    return extra
 
 
 @functools.cache

@@ -22,6 +22,8 @@
       tolerance_N: 2.0            # mean minus (weight + calibrated offset) must stay within these
       tolerance_Nm: 0.2
       timeout_s: 15.0
+    preset: clinical              # the estimator's and the controller's parameters before the
+                                  # sections below (hoh_cosim.presets; default: DEFAULT_PRESET)
     estimator: {...}              # EstimatorParams overrides (the tool comes from the calibration);
                                   # its packet periods and use_probe are the rig's, for both blocks
     controller: {...}             # ControllerParams overrides (gains, limits, fixture, ...), e.g.
@@ -51,6 +53,7 @@ from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.vectors import Rot3
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import from_mapping, override
+from hoh_cosim.presets import DEFAULT_PRESET, Preset, changed_from, load_preset
 from hoh_cosim.yamlfile import Where, parse_value, read_yaml
 
 __all__ = [
@@ -112,6 +115,18 @@ class HardwareConfig:
     controller: ControllerParams
     log_dir: Path
     stale_stop_s: float = 0.25  # a stream silent this long ends the session (shorter: zero twist)
+    preset: Preset | None = None  # the estimator's and the controller's preset
+
+    def preset_changes(self) -> dict[str, object]:
+        """Every value of the estimator's and the controller's parameters that differs from the
+        preset (the rig file's sections, `--set`, the rig's sensors), as `block.leaf` names."""
+        if self.preset is None:
+            return {}
+        return {
+            f"{block}.{name}": value
+            for block, params in (("estimator", self.estimator), ("controller", self.controller))
+            for name, value in changed_from(self.preset.params[block], params).items()
+        }
 
 
 _TOP = (
@@ -119,6 +134,7 @@ _TOP = (
     "ft150",
     "probe",
     "calibration",
+    "preset",
     "rebias",
     "estimator",
     "controller",
@@ -150,9 +166,12 @@ def with_overrides(params: dict[str, Any], overrides: Sequence[str]) -> dict[str
     return params
 
 
-def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConfig:
+def load_config(
+    path: str | Path, overrides: Sequence[str] = (), preset: str | Path | None = None
+) -> HardwareConfig:
     """Read and check a rig's configuration; `overrides` are `estimator.x=v` / `controller.x=v`
-    strings (`--set`)."""
+    strings (`--set`), `preset` a preset's name or file (`--preset`; default: the file's `preset`,
+    else `hoh_cosim.presets.DEFAULT_PRESET`), under the file's estimator and controller sections."""
     path = Path(path)
     w = Where(path)
     raw = w.mapping(read_yaml(path) or {}, _TOP, "")
@@ -236,9 +255,16 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConf
         timeout_s=w.number(rebias.get("timeout_s", 15.0), "rebias.timeout_s", positive=True),
     )
 
+    if preset is None:
+        preset = raw.get("preset", DEFAULT_PRESET)
+        if not isinstance(preset, str) or not preset:
+            raise w.error("preset", f"expected a preset's name or a file's path, got {preset!r}")
+        if preset.endswith((".yaml", ".yml")) or "/" in preset:
+            preset = here / preset
+    chosen = load_preset(preset)
     try:
-        estimator = from_mapping(EstimatorParams(), raw.get("estimator") or {}, "estimator")
-        controller = from_mapping(ControllerParams(), raw.get("controller") or {}, "controller")
+        estimator = from_mapping(chosen.estimator, raw.get("estimator") or {}, "estimator")
+        controller = from_mapping(chosen.controller, raw.get("controller") or {}, "controller")
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     log_dir = here / w.string(raw.get("log_dir", "sessions"), "log_dir")
@@ -264,4 +290,5 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> HardwareConf
         params["controller"],
         log_dir,
         w.number(raw.get("stale_stop_s", 0.25), "stale_stop_s", positive=True),
+        chosen,
     )

@@ -29,6 +29,7 @@ from hoh_cosim.errors import ConfigError, InputFileError
 from hoh_cosim.hardware.config import with_overrides
 from hoh_cosim.hardware.session_log import FLOAT32, RESOLUTION, Session, read_session
 from hoh_cosim.params import with_values
+from hoh_cosim.presets import changed_from, load_preset
 
 __all__ = ["ReplayResult", "replay", "replay_parameters"]
 
@@ -61,8 +62,12 @@ class ReplayResult:
         }
 
 
-def replay_parameters(session: Session) -> tuple[EstimatorParams, ControllerParams, float]:
-    """The estimator's and controller's parameters and the period the session ran with."""
+def replay_parameters(
+    session: Session, preset: str | Path | None = None
+) -> tuple[EstimatorParams, ControllerParams, float]:
+    """The estimator's and controller's parameters and the period the session ran with; with
+    `preset`, that preset's parameters with the session's changes from its own preset (a log
+    without a preset: from the blocks' defaults)."""
     recorded = [m for m in session.messages.get("/events", []) if m.get("event") == "parameters"]
     if not recorded:
         raise InputFileError(
@@ -74,6 +79,20 @@ def replay_parameters(session: Session) -> tuple[EstimatorParams, ControllerPara
         controller = with_values(ControllerParams(), p["controller"])
     except ConfigError as exc:
         raise InputFileError(session.path, "/events parameters", str(exc)) from None
+    if preset is not None:
+        chosen = load_preset(preset)
+        own = p.get("preset")
+        before = load_preset(own) if own else None
+        try:
+            estimator, controller = (
+                with_values(
+                    chosen.params[block],
+                    changed_from(before.params[block] if before else type(params)(), params),
+                )
+                for block, params in (("estimator", estimator), ("controller", controller))
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"--preset {chosen.label}: {exc}") from None
     return estimator, controller, float(p["period_s"])
 
 
@@ -115,10 +134,15 @@ def _vector(values: list[Any]) -> np.ndarray:
     return np.array([math.nan if x is None else x for x in values], dtype=float)
 
 
-def replay(path: str | Path, overrides: Sequence[str] = ()) -> ReplayResult:
-    """Replay a session log with `overrides` (`estimator.x=v`, `controller.x=v`)."""
+def replay(
+    path: str | Path, overrides: Sequence[str] = (), preset: str | Path | None = None
+) -> ReplayResult:
+    """Replay a session log with `overrides` (`estimator.x=v`, `controller.x=v`), and with
+    `preset` (`--preset`) the session as it would have run with that preset: the preset's
+    parameters with what the session changed from its own (the rig's file, its `--set`, the
+    calibration's tool, the sensors), then the overrides."""
     session = read_session(path)
-    estimator_params, controller_params, period = replay_parameters(session)
+    estimator_params, controller_params, period = replay_parameters(session, preset)
     params = with_overrides(
         {"estimator": estimator_params, "controller": controller_params}, overrides
     )

@@ -64,6 +64,7 @@ from hoh_cosim.hardware.streams import (
     robust_period,
 )
 from hoh_cosim.params import leaves
+from hoh_cosim.presets import Preset, changed_from
 
 __all__ = [
     "CycleTiming",
@@ -594,7 +595,10 @@ class Runner:
         self, estimator: Estimator, controller: HandGuidingController, rebias: Rebias
     ) -> None:
         self._event(
-            "parameters", _parameters_json(estimator, controller, rebias, self.robot.period_s)
+            "parameters",
+            _parameters_json(
+                estimator, controller, rebias, self.robot.period_s, self.config.preset
+            ),
         )
 
 
@@ -672,13 +676,27 @@ def _rebias_text(rebias: Rebias) -> str:
 
 
 def _parameters_json(
-    estimator: Estimator, controller: HandGuidingController, rebias: Rebias, period_s: float
+    estimator: Estimator,
+    controller: HandGuidingController,
+    rebias: Rebias,
+    period_s: float,
+    preset: Preset | None,
 ) -> str:
+    """The session's parameters as the log's "parameters" event: every leaf of both blocks, the
+    preset and every value that differs from it (the rig file's, `--set`, the calibration's tool
+    and the rig's sensors)."""
     import json
 
+    changes = {}
+    if preset is not None:
+        for block, params in (("estimator", estimator.params), ("controller", controller.params)):
+            for name, value in changed_from(preset.params[block], params).items():
+                changes[f"{block}.{name}"] = value
     return json.dumps(
         {
             "period_s": period_s,
+            "preset": None if preset is None else preset.label,
+            "preset_changes": changes,
             "estimator": {leaf.name: leaf.value for leaf in leaves(estimator.params)},
             "controller": {leaf.name: leaf.value for leaf in leaves(controller.params)},
             "ft_bias": rebias.ft_bias.tolist(),

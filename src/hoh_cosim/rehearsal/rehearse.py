@@ -34,6 +34,7 @@ from hoh_cosim.hardware.ft150 import FT150Stream
 from hoh_cosim.hardware.robot import Robot, RtdeRobot
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import SessionLog
+from hoh_cosim.presets import Preset
 from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 from hoh_cosim.rehearsal.ur_controller import UrController
 from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
@@ -100,6 +101,7 @@ def rehearsal_config(
     estimator: EstimatorParams | None = None,
     controller: ControllerParams | None = None,
     realtime_priority: int | None = LOOP_PRIORITY,
+    preset: Preset | None = None,
 ) -> HardwareConfig:
     setup = world.setup
     return HardwareConfig(
@@ -117,6 +119,7 @@ def rehearsal_config(
         estimator=estimator or EstimatorParams(),
         controller=controller or ControllerParams(),
         log_dir=log_dir,
+        preset=preset,
     )
 
 
@@ -144,6 +147,7 @@ class Rehearsal:
     seed: int = 1
     realtime_priority: int | None = LOOP_PRIORITY  # None: the default priority
     ur_host: str | None = None
+    preset: Preset | None = None  # what `estimator` and `controller` came from, for the log
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "faults", tuple(self.faults))
@@ -177,6 +181,7 @@ def rehearse(
         retake_s=setup.retake_s,
         seed=setup.seed,
         faults=setup.faults,
+        probe_check_s=_probe_check_s(setup.estimator),
     )
     announce("starting the rehearsal world")
     with RehearsalWorld(world_setup) as world:
@@ -187,6 +192,7 @@ def rehearse(
             estimator=setup.estimator,
             controller=setup.controller,
             realtime_priority=setup.realtime_priority,
+            preset=setup.preset,
         )
         calibration = truth_calibration(world.truth)
         ft = FT150Stream(config.ft150.host, config.ft150.port)
@@ -211,6 +217,13 @@ def rehearse(
             runner = Runner(config, robot, ft, probe, calibration, log, announce=tell)
             session = runner.run(setup.seconds)
     return RehearsalResult(session, setup.log_path, probe.parser.framing, probe.parser.byte_order)
+
+
+def _probe_check_s(estimator: EstimatorParams | None) -> float:
+    """How long the runner's probe check lasts, during which the world's hand pushes the tip."""
+    if estimator is None or estimator.probe_correction.kind != "online":
+        return 0.0
+    return estimator.probe_correction.check_s
 
 
 def _metadata(config: HardwareConfig, setup: WorldSetup) -> dict:

@@ -133,6 +133,9 @@ class WorldSetup:
     probe_byte_order: str = "little"
     seed: int = 1
     faults: tuple[Fault, ...] = field(default_factory=tuple)
+    # the runner's probe check after its rebias: the hand pushes the probe's tip a few times for
+    # this long first, and takes the handle as it ends (0: no check)
+    probe_check_s: float = 0.0
     ft_host: str = "127.0.0.1"  # where the FT-150 stream listens
     ft_port: int = 0  # 0: any free port (the URCap's daemon uses 63351)
 
@@ -216,6 +219,7 @@ class _World:
                 let_go_s=setup.let_go_s,
                 retake_s=setup.retake_s,
                 next_s=next_view,
+                probe_check_s=setup.probe_check_s,
             )
         )
         self.breathing = (
@@ -447,9 +451,14 @@ class _World:
             self.health[3] = t + WORLD_DT
         if self.task_held and self.go:  # the rebias is done: the hand comes in a moment
             self.task_held = False
-            start = t + TASK_LEAD_S
             params = self.operator.params
-            changes = {"start_s": start}
+            changes: dict[str, float] = {}
+            if params.probe_check_s > 0.0:  # the pushes from TASK_LEAD_S on, to the check's end
+                start = t + max(params.probe_check_s, 2.0 * TASK_LEAD_S)
+                changes["probe_check_s"] = start - t - TASK_LEAD_S
+            else:
+                start = t + TASK_LEAD_S
+            changes["start_s"] = start
             if params.task == "push_release":
                 # it lets go release_s after the hand came (a scenario's task starts at 0 s), not
                 # at that time of the world's clock, which the rebias has already run past

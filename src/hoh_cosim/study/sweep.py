@@ -106,6 +106,7 @@ class Variant:
     keep: tuple[str, ...] = ()
     keep_every: int = 10
     keep_data: bool = False
+    preset: str | None = None  # the estimator's and the controller's (None: the scenario's)
 
 
 @dataclass
@@ -138,7 +139,7 @@ def run_variant(variant: Variant) -> Outcome:
     start = time.perf_counter()
     try:
         scenario = load_scenario(
-            variant.scenario, variant.overrides, variant.duration_s, variant.seed
+            variant.scenario, variant.overrides, variant.duration_s, variant.seed, variant.preset
         )
         rec = simulate(scenario, variant.engine, progress=False)
         report = compute_report(scenario, rec)
