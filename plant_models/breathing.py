@@ -28,6 +28,19 @@ Figures (the ranges the population draws from, `plant_models.population`):
   centimetre in quiet breathing and more in deep breathing (Kaneko and Horie 2012, "Breathing
   movements of the chest and abdominal wall in healthy subjects", Respir. Care 57(9):1442-1451);
 - irregularity 0.1: breath-to-breath variation of period and depth of the order of 10 %.
+
+Moving away (the clinical study's planted contact loss, "the patient moves away 15 mm within
+0.3 s"): a patient who shifts, coughs or pulls in the belly takes the skin away from the probe. From
+t_a = `away_s` the surface moves D = `away_m` inward, away from the probe, over T_a = `away_time_s`,
+and stays there:
+
+    d(t) = D (1 - cos(π s)) / 2,   s = clip((t - t_a) / T_a, 0, 1)
+    ḋ(t) = D π sin(π s) / (2 T_a)  while 0 < s < 1, else 0
+    offset = h - d,   rate = ḣ - ḋ
+
+a raised cosine, so the offset and its rate stay continuous; like the breaths, a function of time
+alone, and independent of `start_s`. With `away_m` 0 (the default) the surface never moves away and
+the outputs are the breaths' alone.
 """
 
 from __future__ import annotations
@@ -43,7 +56,7 @@ from hoh_cosim.control.block import Port
 from hoh_cosim.control.vectors import Vec, as_scalar
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["Breathing", "BreathingParams", "breath_value"]
+__all__ = ["Breathing", "BreathingParams", "away_value", "breath_value"]
 
 _CLIP = 2.5  # standard deviations: a breath's period stays positive up to irregularity 0.4
 
@@ -56,6 +69,9 @@ class BreathingParams:
         "irregularity": "1",
         "shape_n": "1",
         "start_s": "s",
+        "away_s": "s",
+        "away_m": "m",
+        "away_time_s": "s",
     }
 
     rate_per_min: float = 15.0  # mean breaths per minute
@@ -63,6 +79,9 @@ class BreathingParams:
     irregularity: float = 0.1  # c: relative standard deviation of each breath's period and depth
     shape_n: int = 2  # Lujan's exponent n
     start_s: float = 0.0  # [s] the surface rests (h = 0) before this
+    away_s: float = 0.0  # [s] the patient begins to move away (with away_m 0: never)
+    away_m: float = 0.0  # [m] how far the surface moves inward, away from the probe (0: never)
+    away_time_s: float = 0.3  # [s] how long the move away takes
 
     def __post_init__(self) -> None:
         object.__setattr__(
@@ -77,10 +96,27 @@ class BreathingParams:
             self, "irregularity", as_scalar(self.irregularity, "irregularity", low=0.0, high=0.4)
         )
         object.__setattr__(self, "start_s", as_scalar(self.start_s, "start_s", low=0.0))
+        object.__setattr__(self, "away_s", as_scalar(self.away_s, "away_s", low=0.0))
+        object.__setattr__(self, "away_m", as_scalar(self.away_m, "away_m", low=0.0, high=0.1))
+        object.__setattr__(
+            self, "away_time_s", as_scalar(self.away_time_s, "away_time_s", low=0.0, low_open=True)
+        )
         n = self.shape_n
         if not isinstance(n, int | np.integer) or isinstance(n, bool) or not 1 <= n <= 5:
             raise ConfigError(f"shape_n: expected an integer from 1 to 5, got {n!r}")
         object.__setattr__(self, "shape_n", int(n))
+
+
+def away_value(distance: float, duration: float, progress: float) -> tuple[float, float]:
+    """(d, ḋ) of a move of `distance` [m] over `duration` [s] at `progress` (clipped to 0-1)."""
+    if progress <= 0.0:
+        return 0.0, 0.0
+    if progress >= 1.0:
+        return distance, 0.0
+    return (
+        distance * (1.0 - math.cos(math.pi * progress)) / 2.0,
+        distance * math.pi * math.sin(math.pi * progress) / (2.0 * duration),
+    )
 
 
 def breath_value(amplitude: float, period: float, phase: float, n: int) -> tuple[float, float]:
@@ -137,7 +173,16 @@ class Breathing:
         return self._breaths[k]
 
     def value(self, t: float) -> tuple[float, float, float]:
-        """(h [m], ḣ [m/s], phase) at time t."""
+        """(offset [m], rate [m/s], phase) at time t: the breath less the move away."""
+        h, h_dot, phase = self._breath_value(t)
+        p = self.params
+        if p.away_m > 0.0:  # only then: without a move the breaths' arithmetic is untouched
+            d, d_dot = away_value(p.away_m, p.away_time_s, (t - p.away_s) / p.away_time_s)
+            h, h_dot = h - d, h_dot - d_dot
+        return h, h_dot, phase
+
+    def _breath_value(self, t: float) -> tuple[float, float, float]:
+        """(h [m], ḣ [m/s], phase) of the breaths at time t."""
         p = self.params
         if t < p.start_s:
             return 0.0, 0.0, 0.0

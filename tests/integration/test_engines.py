@@ -12,6 +12,7 @@ Each engine runs circles.yaml and contact_scan.yaml with the scenario translated
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -325,3 +326,32 @@ def test_export_is_deterministic(exported, tmp_path):
         zipfile.ZipFile(d / "circles.ssp").read("SystemStructure.ssd") for d in (again, exported)
     ]
     assert ssd[0] == ssd[1]
+
+
+def test_export_with_a_preset_gives_the_fmus_its_values_as_defaults(tmp_path):
+    """`--preset`: the estimator's and the controller's FMUs start at the preset's values, in
+    their model description and when an importer sets nothing; the other FMUs are as ever."""
+    from fmpy import extract, instantiate_fmu, read_model_description
+
+    out = tmp_path / "clinical"
+    command = ["export", "scenarios/circles.yaml", "--out", str(out), "--duration", "2"]
+    assert main([*command, "--preset", "clinical"]) == 0
+    assert json.loads((out / "export.json").read_text())["preset"] == "clinical"
+    controller = out / "fmus" / "HohController.fmu"
+    md = read_model_description(str(controller))
+    starts = {v.name: v for v in md.modelVariables}
+    assert starts["glide.enabled"].start == "true"
+    assert starts["recovery.enabled"].start == "true"
+    assert starts["translation.slope[1]"].start == "0.0125"
+    fmu = instantiate_fmu(extract(str(controller), str(tmp_path / "x")), md, "CoSimulation")
+    try:
+        refs = [starts[n].valueReference for n in ("hold.enabled", "use_probe")]
+        assert fmu.getBoolean(refs) == [True, True]
+    finally:
+        fmu.freeInstance()
+    plant = read_model_description(str(out / "fmus" / "HohPlant.fmu"))
+    plain = out.parent / "seed"
+    assert main([*command[:3], str(plain), *command[4:], "--preset", "seed"]) == 0
+    seed_md = read_model_description(str(plain / "fmus" / "HohController.fmu"))
+    assert {v.name: v.start for v in seed_md.modelVariables}["glide.enabled"] == "false"
+    assert read_model_description(str(plain / "fmus" / "HohPlant.fmu")).guid == plant.guid

@@ -104,6 +104,54 @@ def test_still_before_the_start() -> None:
     assert rows[rows[:, 0] > 5.0, 1].max() > 0.0
 
 
+# -- the patient moving away (the clinical study's planted contact loss) ---------------------------
+
+AWAY = {"away_s": 5.0, "away_m": 0.015, "away_time_s": 0.3}  # 15 mm within 0.3 s
+
+
+def test_the_move_away_reaches_its_distance_and_stays() -> None:
+    still = run(BreathingParams(), 8.0)
+    moved = run(BreathingParams(**AWAY), 8.0)
+    t, d = moved[:, 0], still[:, 1] - moved[:, 1]  # inward: the offset decreases by d
+    assert not d[t <= 5.0].any()
+    np.testing.assert_allclose(d[t >= 5.3], 0.015, rtol=1e-12)
+    ramp = (t > 5.0) & (t < 5.3)
+    assert np.all(np.diff(d[ramp]) > 0.0)
+    assert d[np.argmin(np.abs(t - 5.15))] == pytest.approx(
+        0.0075, rel=1e-9
+    )  # half way at half time
+    # the raised cosine and its derivative; the phases do not move
+    u = np.clip((t - 5.0) / 0.3, 0.0, 1.0)
+    np.testing.assert_allclose(d, 0.015 * (1.0 - np.cos(np.pi * u)) / 2.0, rtol=1e-9, atol=1e-15)
+    d_dot = 0.015 * np.pi * np.sin(np.pi * u) / 0.6
+    np.testing.assert_allclose(still[:, 2] - moved[:, 2], d_dot, rtol=1e-9, atol=1e-15)
+    np.testing.assert_array_equal(still[:, 3], moved[:, 3])
+
+
+def test_the_move_away_is_continuous_and_its_rate_is_its_derivative() -> None:
+    rows = run(BreathingParams(**AWAY), 6.0, dt=1e-4)
+    near = (rows[:, 0] > 4.9) & (rows[:, 0] < 5.4)  # both ends of the ramp
+    top_rate = 0.015 * math.pi / 0.6  # D π / (2 T_a), the ramp's steepest
+    # 0.1 ms at the steepest ramp is 7.9 µm; at its largest acceleration (D π² / 2 T_a², 0.82 m/s²)
+    # the rate moves 82 µm/s: a step of a linear ramp's rate (D / T_a, 0.05 m/s) would not pass
+    assert np.max(np.abs(np.diff(rows[near, 1]))) < 1e-4 * 1.05 * top_rate
+    assert np.max(np.abs(np.diff(rows[near, 2]))) < 1e-4 * 1.05 * 0.015 * math.pi**2 / 0.18
+    numeric = np.gradient(rows[:, 1], rows[:, 0])
+    assert np.max(np.abs(numeric - rows[:, 2])) < 1e-3 * top_rate
+
+
+def test_the_move_away_is_a_function_of_time_alone() -> None:
+    fine = run(BreathingParams(**AWAY), 8.0, dt=1e-3)
+    coarse = run(BreathingParams(**AWAY), 7.9, dt=7e-3)
+    rows = np.rint(coarse[:, 0] / 1e-3).astype(int) - 1
+    np.testing.assert_allclose(coarse[:, 1:], fine[rows, 1:], rtol=1e-12, atol=1e-15)
+
+
+def test_without_a_distance_there_is_no_move_away() -> None:
+    default = run(BreathingParams(), 10.0)
+    np.testing.assert_array_equal(run(BreathingParams(away_s=5.0, away_time_s=1.0), 10.0), default)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
@@ -112,6 +160,10 @@ def test_still_before_the_start() -> None:
         ({"irregularity": 0.5}, r"irregularity must be <= 0.4"),
         ({"shape_n": 0}, r"shape_n: expected an integer from 1 to 5, got 0"),
         ({"shape_n": 1.5}, r"shape_n: expected an integer from 1 to 5, got 1.5"),
+        ({"away_s": -1.0}, r"away_s must be >= 0.0, got -1.0"),
+        ({"away_m": -0.001}, r"away_m must be >= 0.0, got -0.001"),
+        ({"away_m": 0.2}, r"away_m must be <= 0.1, got 0.2"),
+        ({"away_time_s": 0.0}, r"away_time_s must be > 0.0, got 0.0"),
     ],
 )
 def test_bad_parameters_are_refused(kwargs: dict, message: str) -> None:

@@ -278,6 +278,7 @@ def _export(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         seed=args.seed,
         command=shlex.join(["hoh-cosim", "export", *args.argv]),
+        preset=args.preset,
     )
     for component, path in result.fmus.items():
         print(f"{component:<11} {path}")

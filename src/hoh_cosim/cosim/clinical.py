@@ -24,6 +24,12 @@ the robot (a `plant`) or freehand (a `freehand` probe), on a phantom that may br
   tip `SCAN_COVERAGE` of the line along it. None (and a note) if never;
 - `path_rms_error_m`: RMS distance between the tip and where the hand wants it (operator.p_ref_B),
   across the pressing direction, over the measurement window;
+- recovery from the patient moving away (the clinical study's planted contact loss: a `breathing`
+  component with `away_m` > 0, else None): `recovery_time_s` from the move's start (`away_s`) to
+  the first time the contact force along the pressing direction is back at `RECOVERY_LEVEL` of
+  its mean over the `RECOVERY_BEFORE_S` before the move, counted once the contact was lost or fell
+  under `RECOVERY_LOST` of that mean (0 if it never did: the contact was kept; None and a note if
+  it never came back), `recovery_peak_N` the largest such force from the move's start to the end;
 - hold-on-release (`hoh_cosim.control.hold`), from the controller's recorded status (None without
   one): `hold_s` how long the robot held the contact (the HOLDING flag); `hold_contact_force_std_N`
   the std of the phantom's force along the pressing direction while it held with the hand off the
@@ -81,6 +87,13 @@ is a 0.1 s step of a few newtons); the force's std is measured from then."""
 RELEASE_WINDOW_S = 0.5
 """[s] The contact force at the release is its mean over this long before the hand began to open:
 the hand's press loop, not one instant of its tremor."""
+RECOVERY_BEFORE_S = 2.0
+"""[s] The contact force before the patient moved away is its mean over this long before the move."""
+RECOVERY_LOST = 0.5
+"""The contact counts as lost off the phantom or under this fraction of its force before the move."""
+RECOVERY_LEVEL = 0.8
+"""The contact is back once its force is at or above this fraction of its force before the move."""
+RECOVERY_METRICS = ("recovery_time_s", "recovery_peak_N")
 HOLD_METRICS = (
     "hold_s",
     "hold_contact_force_std_N",
@@ -104,6 +117,7 @@ CLINICAL_METRICS = (
     "jitter_rotation_deg",
     "task_time_s",
     "path_rms_error_m",
+    *RECOVERY_METRICS,
     *HOLD_METRICS,
 )
 """Every metric of the set, in the order of the tables."""
@@ -268,11 +282,46 @@ def clinical_metrics(scenario: Scenario, rec: Recording) -> tuple[dict[str, obje
             f"clinical: the run ends less than {CONTACT_SETTLE_S:g} s after the first touch or "
             "the reach: no window for the stability metrics"
         )
+    recovery, recovery_notes = _recovery_metrics(scenario, rec, pressing, depth)
+    m.update(recovery)
+    notes.extend(recovery_notes)
     m.update(_hold_metrics(scenario, rec, pressing, depth))
     m["task_time_s"] = _task_time(scenario, rec, pressing)
     if m["task_time_s"] is None and p.task in ("view", "press", "scan"):
         notes.append(f"clinical: the {p.task} task's goal was never reached and held")
     return m, notes
+
+
+def _recovery_metrics(
+    scenario: Scenario, rec: Recording, pressing: np.ndarray, depth: np.ndarray
+) -> tuple[dict[str, object], list[str]]:
+    """The recovery metrics (module docstring), and notes on what could not be measured."""
+    m: dict[str, object] = dict.fromkeys(RECOVERY_METRICS)
+    breathing = scenario.component_of_kind("breathing")
+    if breathing is None or breathing.params.away_m <= 0.0:
+        return m, []
+    t = rec.time
+    away_s = breathing.params.away_s
+    after = t >= away_s
+    if not after.any():
+        return m, ["clinical: the run ends before the patient moves away: no recovery metrics"]
+    m["recovery_peak_N"] = float(np.max(pressing[after]))
+    before = (t >= away_s - RECOVERY_BEFORE_S) & (t < away_s)
+    level = float(np.mean(pressing[before])) if before.any() else 0.0
+    if level <= 0.0:
+        return m, ["clinical: no contact force before the patient moved away: no recovery time"]
+    lost = after & ((depth <= 0.0) | (pressing < RECOVERY_LOST * level))
+    if not lost.any():
+        m["recovery_time_s"] = 0.0
+        return m, []
+    back = (pressing >= RECOVERY_LEVEL * level) & (np.arange(len(t)) > np.argmax(lost))
+    if not back.any():
+        return m, [
+            f"clinical: the contact never came back to {RECOVERY_LEVEL:.0%} of its force before "
+            "the patient moved away by the end of the run"
+        ]
+    m["recovery_time_s"] = float(t[np.argmax(back)] - away_s)
+    return m, []
 
 
 def _runs(flag: np.ndarray) -> list[tuple[int, int]]:

@@ -172,6 +172,16 @@ def _readme(
         "",
         f"Exported by hoh-cosim {__version__} with `{command}`. {scenario.description}",
         "",
+        *(
+            [
+                f"The estimator's and the controller's parameters start at the preset "
+                f"`{scenario.preset.label}` ({scenario.preset.description}): an FMU loaded alone "
+                "runs with them, and the parameter set holds every value the scenario gives.",
+                "",
+            ]
+            if scenario.preset is not None
+            else []
+        ),
         "| file | what |",
         "|---|---|",
         f"| `{ssp_name}` | SSP 1.0 archive: `SystemStructure.ssd` (components, connections, "
@@ -304,14 +314,19 @@ def export_scenario(
     duration_s: float | None = None,
     seed: int | None = None,
     command: str | None = None,
+    preset: str | None = None,
 ) -> ExportResult:
-    """Write the scenario's FMUs, SSP archive, OSP system structure and README into `out`."""
+    """Write the scenario's FMUs, SSP archive, OSP system structure and README into `out`; the
+    estimator's and the controller's FMUs start from the scenario's preset (`preset`: another)."""
+    from hoh_cosim.fmi.build import ensure_fmus
     from hoh_cosim.results import check_out_dir, replace_dir
 
-    scenario = load_scenario(path, overrides, duration_s, seed)
+    scenario = load_scenario(path, overrides, duration_s, seed, preset)
     out = Path(out)
     check_out_dir(out, marker="export.json", what="export")
-    system = system_of(scenario)
+    kinds = sorted({c.kind.name for c in scenario.components.values() if c.fmu is None})
+    defaults = {} if scenario.preset is None else dict(scenario.preset.params)
+    system = system_of(scenario, ensure_fmus(kinds, defaults=defaults))
     for fmu in sorted(set(system.fmus.values())):
         _validate_fmu(fmu)
     file_of = {name: fmu.name for name, fmu in system.fmus.items()}
@@ -350,6 +365,7 @@ def export_scenario(
             "dt_s": scenario.dt_s,
             "duration_s": scenario.duration_s,
             "overrides": list(overrides),
+            "preset": None if scenario.preset is None else scenario.preset.label,
             "ssp": ssp_name,
             "parameter_set": PARAMETER_SET,
             "components": {

@@ -28,8 +28,9 @@ import plant_models
 from hoh_cosim.control.block import variable_step
 from hoh_cosim.errors import HohError, RunError
 from hoh_cosim.fmi.model_description import finish_model_description
-from hoh_cosim.fmi.slave import INPUT_STARTS, block_interface
+from hoh_cosim.fmi.slave import INPUT_STARTS, PARAMETERS, block_interface
 from hoh_cosim.kinds import KINDS, input_starts
+from hoh_cosim.params import leaves
 
 __all__ = [
     "build_fmu",
@@ -100,9 +101,9 @@ def _fingerprint(script: Path) -> str:
     return digest.hexdigest()
 
 
-def _build(kind: str, script: Path, out: Path) -> None:
+def _build(kind: str, script: Path, out: Path, defaults: Any = None) -> None:
     spec = KINDS[kind]
-    build_fmu(script, out, spec.block, spec.params, spec.description, input_starts(kind))
+    build_fmu(script, out, spec.block, spec.params, spec.description, input_starts(kind), defaults)
 
 
 def build_fmu(
@@ -112,10 +113,12 @@ def build_fmu(
     params: type,
     description: str,
     starts: Mapping[str, Any] | None = None,
+    defaults: Any = None,
 ) -> None:
     """Build the FMU of the entry script `script` (a `BlockSlave` subclass wrapping `block` with
-    `params`, its inputs starting at `starts`, else 0) with pythonfmu, finish its model
-    description, and put it at `out` atomically, mode 0644."""
+    `params`, its inputs starting at `starts`, else 0, its parameters at `defaults`, else the
+    block's defaults) with pythonfmu, finish its model description, and put it at `out`
+    atomically, mode 0644."""
     from pythonfmu.builder import FmuBuilder
 
     kind = block.__name__
@@ -130,7 +133,7 @@ def build_fmu(
                 f"building the {kind} FMU from {script} failed: {type(exc).__name__}: {exc}"
                 + (f" (pythonfmu said: {output})" if output else "")
             ) from None
-        specs = block_interface(block, params, starts)
+        specs = block_interface(block, params, starts, defaults)
         finished = Path(tmp) / "finished.fmu"
         with (
             zipfile.ZipFile(built) as src,
@@ -156,9 +159,13 @@ def build_fmu(
                 for vr, spec in enumerate(specs)
                 if spec.causality == "input" and spec.start
             }
-            entry = zipfile.ZipInfo(f"resources/{INPUT_STARTS}", (1980, 1, 1, 0, 0, 0))
-            entry.compress_type, entry.external_attr = zipfile.ZIP_DEFLATED, 0o100644 << 16
-            dst.writestr(entry, json.dumps(starts, indent=1))
+            resources = {INPUT_STARTS: starts}
+            if defaults is not None:
+                resources[PARAMETERS] = _parameters_json(params, defaults)
+            for name, content in resources.items():
+                entry = zipfile.ZipInfo(f"resources/{name}", (1980, 1, 1, 0, 0, 0))
+                entry.compress_type, entry.external_attr = zipfile.ZIP_DEFLATED, 0o100644 << 16
+                dst.writestr(entry, json.dumps(content, indent=1))
         # a unique name beside the target, then one rename: a concurrent build or a reader never
         # sees half a file
         fd, part = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
@@ -172,10 +179,22 @@ def build_fmu(
             raise
 
 
+def _parameters_json(params_cls: type, defaults: Any) -> dict[str, Any]:
+    """The leaves of `defaults` that differ from the class's defaults."""
+    before = {leaf.name: leaf.value for leaf in leaves(params_cls())}
+    return {leaf.name: leaf.value for leaf in leaves(defaults) if before[leaf.name] != leaf.value}
+
+
 def ensure_fmus(
-    kinds: Iterable[str], cache_dir: Path | None = None, force: bool = False
+    kinds: Iterable[str],
+    cache_dir: Path | None = None,
+    force: bool = False,
+    defaults: Mapping[str, Any] | None = None,
 ) -> dict[str, Path]:
-    """An up-to-date FMU for every kind, building the missing and the stale ones."""
+    """An up-to-date FMU for every kind, building the missing and the stale ones; `defaults`
+    gives a kind's parameters other start values than its block's (a preset's): such an FMU is
+    kept apart, under `defaults/<its values' hash>/`."""
+    defaults = defaults or {}
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     try:
         cache.mkdir(parents=True, exist_ok=True)
@@ -188,10 +207,20 @@ def ensure_fmus(
         if not script.is_file():
             raise HohError(f"{script}: missing: the entry script of the {kind} FMU")
         out = cache / f"{fmu_name(kind)}.fmu"
-        stamp = out.with_suffix(".fmu.sha256")
         fingerprint = _fingerprint(script)
+        own = defaults.get(kind)
+        values = None if own is None else _parameters_json(KINDS[kind].params, own)
+        if values:  # other start values: an FMU of their own
+            text = json.dumps(values, sort_keys=True)
+            key = hashlib.sha256(text.encode()).hexdigest()[:16]
+            out = cache / "defaults" / key / out.name
+            out.parent.mkdir(parents=True, exist_ok=True)
+            fingerprint = hashlib.sha256(f"{fingerprint} {text}".encode()).hexdigest()
+        else:
+            own = None
+        stamp = out.with_suffix(".fmu.sha256")
         if force or not out.is_file() or not stamp.is_file() or stamp.read_text() != fingerprint:
-            _build(kind, script, out)
+            _build(kind, script, out, own)
             stamp_part = stamp.with_name(f".{stamp.name}.{os.getpid()}")
             stamp_part.write_text(fingerprint)
             os.replace(stamp_part, stamp)

@@ -55,6 +55,10 @@ def _unit_element(name: str) -> ET.Element:
     return unit
 
 
+def _boolean(value: object) -> str:
+    return "true" if value else "false"
+
+
 def finish_model_description(
     xml: bytes,
     specs: Sequence[VariableSpec],
@@ -88,6 +92,10 @@ def finish_model_description(
                 units.append(spec.unit)
         if real is not None and real.get("start") is not None and spec.start is not None:
             real.set("start", repr(float(spec.start)))  # 17 digits: the exact default
+        for tag, text in (("Integer", str), ("Boolean", _boolean), ("String", str)):
+            other = var.find(tag)
+            if other is not None and other.get("start") is not None and spec.start is not None:
+                other.set("start", text(spec.start))  # the build's defaults (a preset's)
 
     for tag in ("UnitDefinitions", "DefaultExperiment", "ModelStructure"):
         for old in root.findall(tag):

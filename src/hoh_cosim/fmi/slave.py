@@ -59,6 +59,7 @@ from hoh_cosim.params import leaves, with_values
 
 __all__ = [
     "INPUT_STARTS",
+    "PARAMETERS",
     "BlockSlave",
     "VariableSpec",
     "block_interface",
@@ -89,10 +90,14 @@ class VariableSpec:
 
 
 def block_interface(
-    block_cls: type, params_cls: type, starts: Mapping[str, Any] | None = None
+    block_cls: type,
+    params_cls: type,
+    starts: Mapping[str, Any] | None = None,
+    defaults: Any = None,
 ) -> list[VariableSpec]:
     """Every FMI variable of the FMU wrapping `block_cls`, in value-reference order; `starts`
-    gives input ports' start values (`hoh_cosim.kinds.input_starts`), the others start at 0."""
+    gives input ports' start values (`hoh_cosim.kinds.input_starts`), the others start at 0;
+    `defaults` the parameters' start values (a `params_cls`; None: its defaults)."""
     specs: list[VariableSpec] = []
     starts = starts or {}
     for causality, ports in (("input", block_cls.inputs), ("output", block_cls.outputs)):
@@ -112,7 +117,7 @@ def block_interface(
                         port.description,
                     )
                 )
-    params = leaves(params_cls())
+    params = leaves(params_cls() if defaults is None else defaults)
     extra = []
     if takes_rng(block_cls):
         extra.append(
@@ -171,7 +176,9 @@ class BlockSlave(_PythonFmuSlave):
         super().__init__(**kwargs)
         cls = type(self)
         self.description = (cls.block.__doc__ or cls.block.__name__).strip().splitlines()[0]
-        self.specs = block_interface(cls.block, cls.params)
+        self.specs = block_interface(
+            cls.block, cls.params, defaults=_declared_parameters(self.resources, cls.params)
+        )
         self._n_in = sum(p.size for p in cls.block.inputs)
         self._n_io = self._n_in + sum(p.size for p in cls.block.outputs)
         reals = [s for s in self.specs if s.type == "Real"]
@@ -408,18 +415,35 @@ them: {value reference: start} for those that are not 0 (hosts need not extract 
 description beside the resources, fmpy's simulate_fmu does not)."""
 
 
-def _declared_input_starts(resources: str | None) -> dict[int, float]:
-    """The inputs' start values that the build wrote (`INPUT_STARTS`), by value reference, so a
-    master that sets no input runs the block from them. Nothing found: {} (the inputs start at 0)."""
+PARAMETERS = "parameters.json"
+"""The file in an FMU's resources/ with the parameters' start values where the build gave others
+than the block's defaults (a preset's, `hoh-cosim export --preset`): {leaf: value}."""
+
+
+def _resource(resources: str | None, name: str) -> Any:
+    """A JSON file of the FMU's resources/, None if there is none."""
     if not resources:
-        return {}
+        return None
     location = urlparse(resources)
     folder = Path(unquote(location.path) if location.scheme == "file" else resources)
     try:
-        data = json.loads((folder / INPUT_STARTS).read_text())
+        return json.loads((folder / name).read_text())
     except (OSError, ValueError):
-        return {}
+        return None
+
+
+def _declared_input_starts(resources: str | None) -> dict[int, float]:
+    """The inputs' start values that the build wrote (`INPUT_STARTS`), by value reference, so a
+    master that sets no input runs the block from them. Nothing found: {} (the inputs start at 0)."""
+    data = _resource(resources, INPUT_STARTS) or {}
     return {int(vr): float(value) for vr, value in data.items()}
+
+
+def _declared_parameters(resources: str | None, params_cls: type) -> Any:
+    """The parameters' start values that the build wrote (`PARAMETERS`), as a `params_cls`, so
+    the FMU run alone runs the block with them; None: the block's defaults."""
+    data = _resource(resources, PARAMETERS)
+    return None if not data else with_values(params_cls(), data)
 
 
 def pin_namespace(namespace: dict[str, Any]) -> None:
