@@ -39,7 +39,8 @@ def test_the_shipped_presets_load_in_their_order_with_one_line_each():
         preset = load_preset(name)
         assert preset.name == name
         assert preset.path == PRESETS_DIR / f"{name}.yaml"
-        assert preset.description and "\n" not in preset.description
+        assert preset.description
+        assert "\n" not in preset.description
         assert preset.label == name
 
 
@@ -75,12 +76,17 @@ def test_the_clinical_preset_has_every_piece_and_the_probe_check():
     assert clinical.probe_check_s == 20.0
     assert (e.probe_correction.kind, e.probe_correction.check_s) == ("online", 20.0)
     assert e.probe_correction.across_from_wrist_s == 5.0
-    assert c.glide.enabled and c.follow.enabled and c.release.enabled
-    assert c.hold.enabled and c.recovery.enabled
+    assert c.glide.enabled
+    assert c.follow.enabled
+    assert c.release.enabled
+    assert c.hold.enabled
+    assert c.recovery.enabled
     assert (c.hold.motion, c.hold.retake_band_N, c.hold.swing_s) == ("normal", 1.0, 0.1)
     # the rest is the seed's law
-    assert c.translation.law == "deadband_linear" and e.filter == "kalman"
-    assert not c.virtual_fixture and not c.passivity.enabled
+    assert c.translation.law == "deadband_linear"
+    assert e.filter == "kalman"
+    assert not c.virtual_fixture
+    assert not c.passivity.enabled
 
 
 def test_a_preset_sets_only_what_it_names():
@@ -110,7 +116,8 @@ def test_a_users_preset_file_extends_a_shipped_one(tmp_path):
     assert preset.label == str(mine)
     assert not preset.shipped
     np.testing.assert_array_equal(preset.controller.translation.deadband, [0.8, 0.8, 0.25])
-    assert preset.controller.hold.enabled and preset.probe_check_s == 20.0
+    assert preset.controller.hold.enabled
+    assert preset.probe_check_s == 20.0
 
 
 def test_a_preset_file_extends_another_file_by_its_path(tmp_path):
@@ -178,7 +185,8 @@ def test_an_unknown_preset_lists_the_known_ones():
 
 def test_a_scenario_without_a_preset_takes_the_default_and_its_own_params_win():
     scenario = load_scenario(SCENARIOS / "clinical_assisted.yaml")
-    assert scenario.preset is not None and scenario.preset.name == DEFAULT_PRESET
+    assert scenario.preset is not None
+    assert scenario.preset.name == DEFAULT_PRESET
     # the file's own estimator params (the rig's tool) are over the preset, and reported
     changes = scenario.preset_changes()
     assert changes["estimator.tool.mass_kg"] == 0.48
@@ -190,14 +198,16 @@ def test_the_preset_comes_before_the_files_params_and_set_after_both(tmp_path):
     scenario = load_scenario(SCENARIOS / "contact_scan_fixture.yaml", preset="transparent")
     controller = scenario.components["controller"].params
     assert controller.virtual_fixture  # the file's own
-    assert controller.passivity.enabled and controller.translation.law == "variable"  # the preset's
+    assert controller.passivity.enabled
+    assert controller.translation.law == "variable"
     scenario = load_scenario(
         SCENARIOS / "contact_scan_fixture.yaml",
         ["controller.passivity.enabled=false", "controller.virtual_fixture=false"],
         preset="transparent",
     )
     controller = scenario.components["controller"].params
-    assert not controller.passivity.enabled and not controller.virtual_fixture
+    assert not controller.passivity.enabled
+    assert not controller.virtual_fixture
     assert scenario.preset_changes()["controller.passivity.enabled"] is False
     assert "virtual_fixture: true" in text
 
@@ -293,14 +303,16 @@ def test_the_presets_command_lists_every_preset(capsys):
         assert any(line.startswith(f"{name} ") for line in text.splitlines()), name
     assert main(["presets", "clinical", "--json"]) == 0
     shown = json.loads(capsys.readouterr().out)
-    assert shown["name"] == "clinical" and shown["probe_check_s"] == 20.0
+    assert shown["name"] == "clinical"
+    assert shown["probe_check_s"] == 20.0
     assert shown["changes"]["controller.recovery.enabled"] is True
 
 
 def test_the_presets_command_refuses_an_unknown_one_in_one_line(capsys):
     assert main(["presets", "turbo"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "unknown (presets: seed," in err
+    assert err.count("\n") == 1
+    assert "unknown (presets: seed," in err
 
 
 # --- on a rig -------------------------------------------------------------------------------------
@@ -318,16 +330,19 @@ def test_a_rig_file_takes_a_preset_under_its_sections_and_the_option_over_it(tmp
     assert config.preset.name == DEFAULT_PRESET
     config = load_config(rig(tmp_path, "preset: hold\ncontroller: {hold: {swing_s: 0.2}}\n"))
     assert config.preset.name == "hold"
-    assert config.controller.hold.enabled and config.controller.hold.swing_s == 0.2
+    assert config.controller.hold.enabled
+    assert config.controller.hold.swing_s == 0.2
     assert config.preset_changes() == {"controller.hold.swing_s": 0.2}
     config = load_config(
         rig(tmp_path, "preset: hold\n"), ["controller.release.hold_s=0.3"], preset="clinical"
     )
-    assert config.preset.name == "clinical" and config.controller.recovery.enabled
+    assert config.preset.name == "clinical"
+    assert config.controller.recovery.enabled
     assert config.preset_changes() == {"controller.release.hold_s": 0.3}
     mine = write(tmp_path / "mine.yaml", "description: m\ncontroller: {follow: {enabled: true}}\n")
     config = load_config(rig(tmp_path, "preset: mine.yaml\n"))
-    assert config.controller.follow.enabled and config.preset.path == mine
+    assert config.controller.follow.enabled
+    assert config.preset.path == mine
 
 
 def test_a_rig_files_bad_preset_is_one_line(tmp_path):
