@@ -7,7 +7,9 @@ commanded, tick by tick, in every scenario that has one and in the clinical stud
 The run list (`controller_reference.json`) is each run's scenario, `--set` overrides, seed and
 duration, written out literally so that the runs stay what they were whatever the project's code
 and presets become. The clinical study's runs are one operator's (the study's seed 1, operator 1),
-each mode's `--quick` task, with the overrides the study gave them when this file was made.
+each mode's `--quick` task, with the overrides the study gave them when this file was made: the
+study's code of that time makes them, so the script runs on that commit (5d17755, in a git
+worktree with this file copied in).
 
 The signals (`controller_reference.npz`), per run `NAME`: `NAME/twist_B` and `NAME/twist_law_B`
 (every controller tick), `NAME/status` and `NAME/brake_accel` (every controller tick) and
@@ -124,14 +126,15 @@ def make_runs() -> list[dict]:
     return runs + _study_runs()
 
 
-def record(run: dict) -> dict[str, np.ndarray]:
-    """One run's controller outputs at its own ticks, and the plant's tip."""
+def record(run: dict, preset: str | None = None) -> dict[str, np.ndarray]:
+    """One run's controller outputs at its own ticks, and the plant's tip; `preset`: the one the
+    run is loaded with (the code before presets had none: the blocks' defaults, the seed's law)."""
     from hoh_cosim.cosim.engines import simulate
     from hoh_cosim.cosim.scenario import load_scenario
 
-    scenario = load_scenario(
-        ROOT / "scenarios" / run["scenario"], run["overrides"], run["duration_s"], run["seed"]
-    )
+    path = ROOT / "scenarios" / run["scenario"]
+    args = (path, run["overrides"], run["duration_s"], run["seed"])
+    scenario = load_scenario(*args) if preset is None else load_scenario(*args, preset)
     every = scenario.components["controller"].every
     rec = simulate(scenario, "inprocess", progress=False)
     ticks = slice(every - 1, None, every)  # the controller's outputs, held from its step on

@@ -221,7 +221,8 @@ def test_replay_with_contact_compensation_off_sets_only_that(log):
         (
             "controller.nope=1",
             "--set controller.nope: unknown parameter of ControllerParams (one of: translation, "
-            "rotation, contact_compensation, contact_torque, virtual_fixture, fixture_threshold_N, "
+            "rotation, contact_compensation, compensation_onset_N, contact_torque, virtual_fixture, "
+            "fixture_threshold_N, "
             "fixture_up_B, fixture_normal, limits, release, variable, passivity, hold, follow, glide, "
             "recovery, touch_down_N, lift_off_N, use_probe, ft_period_s, probe_period_s)",
         ),

@@ -164,9 +164,10 @@ def test_paired_change_per_operator_with_its_confidence_interval() -> None:
 
 
 def test_the_closed_sets() -> None:
-    """One freehand mode, assisted ones on the robot; the three tasks of the issue."""
+    """One freehand mode, assisted ones on the robot; the three tasks of issue 23 and the recovery
+    of issue 51."""
     assert [m for m in MODES.values() if not m.assisted] == [MODES["freehand"]]
-    assert set(TASKS) == {"view", "scan", "press"}
+    assert set(TASKS) == {"view", "scan", "press", "recover"}
     assert dict(TASKS["scan"].operator)["target_force_N"] == 8.0
     assert dict(TASKS["press"].operator)["target_force_N"] == 15.0
     assert dict(TASKS["scan"].operator)["length_m"] == 0.10

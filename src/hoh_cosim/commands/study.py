@@ -4,7 +4,8 @@
     hoh-cosim report [--out DIR] [--quick] [--workers N] [--scheduler ADDRESS] [--scenarios DIR]
     hoh-cosim tune [--out DIR] [-n N] [--seed S] [--seeds 1,2,3] [--workers N] [--scheduler ADDRESS]
     hoh-cosim probe-correction [--out DIR] [--seed S] [--engine E] [--workers N] [--quick]
-    hoh-cosim study clinical [--quick] [--operators N] [--seed S] [--workers W] [--scheduler ADDR]
+    hoh-cosim study clinical [--quick] [--operators N] [--seed S] [--preset NAME ...] [--figures F]
+                             [--workers W] [--scheduler ADDR]
                              [--out DIR] [--set C.P=V ...]
 
 `--workers 0` runs everything serially in this process (no Dask).
@@ -166,9 +167,10 @@ def add_commands(sub) -> None:
         help="freehand against assisted scanning on a breathing patient, N operators",
         description=(
             "N simulated sonographers (hand, tremor, strength, grip; a breathing patient each) "
-            "reach a view and hold it, scan a 10 cm line at 8 N and press to 15 N, freehand and "
-            "assisted under each law; paired comparisons per operator with 95 %% confidence "
-            "intervals; write index.html, report.md, runs.csv, operators.csv and summary.json."
+            "reach a view and hold it, scan a 10 cm line at 8 N, press to 15 N and hold a view "
+            "while the patient moves away, freehand and assisted under each preset; paired "
+            "comparisons per operator with 95 % confidence intervals, the targets; write "
+            "index.html, report.md, runs.csv, operators.csv and summary.json."
         ),
     )
     clinical.add_argument(
@@ -191,10 +193,25 @@ def add_commands(sub) -> None:
         default="scenarios",
         help="where clinical_freehand.yaml and clinical_assisted.yaml are (default: ./scenarios)",
     )
+    clinical.add_argument(
+        "--preset",
+        dest="presets",
+        action="append",
+        default=[],
+        metavar="NAME|FILE",
+        help="an assisted mode: this preset (repeatable; default: seed, transparent, checked, "
+        "hold, follow, glide and clinical)",
+    )
     add_set_option(
         clinical,
-        "set a parameter in every assisted mode's runs, after the mode's own, e.g. "
+        "set a parameter in every assisted mode's runs, after the mode's preset, e.g. "
         "controller.translation.slope=[0.04,0.04,0.04] (repeatable; freehand as it is)",
+    )
+    clinical.add_argument(
+        "--figures",
+        metavar="FILE",
+        help="also write the presets' headline figures to FILE, as 'hoh-cosim presets' shows them "
+        "(src/hoh_cosim/presets/figures.json in a checkout)",
     )
     _cluster_options(clinical)
 
@@ -389,7 +406,7 @@ def _mm(value: float | None) -> float | None:
 
 
 def _clinical(args: argparse.Namespace) -> int:
-    from hoh_cosim.study.clinical import ASSISTED, MODES, TASKS, run_clinical
+    from hoh_cosim.study.clinical import TASKS, run_clinical
 
     result = run_clinical(
         args.out,
@@ -401,6 +418,8 @@ def _clinical(args: argparse.Namespace) -> int:
         scenarios=args.scenarios,
         progress=not args.quiet,
         overrides=args.overrides,
+        presets=args.presets or None,
+        figures_out=args.figures,
     )
     s = result.summary
     print(
@@ -409,31 +428,42 @@ def _clinical(args: argparse.Namespace) -> int:
     )
     if s["overrides"]:
         print("  every assisted mode with " + " ".join(f"--set {t}" for t in s["overrides"]))
-    width = max(len(MODES[mode].label) for mode in ASSISTED)
-    print(f"  {'task':6} {'mode':{width}}  {'hand force less [%]':>26}  {'jitter less [%]':>26}")
+    assisted = [m for m in s["modes"] if m in s["presets"]]
+    width = max(len(s["modes"][mode]) for mode in assisted)
+    print(f"  {'task':7} {'mode':{width}}  {'hand force less [%]':>26}  {'jitter less [%]':>26}")
     for task in TASKS:
-        for mode in ASSISTED:
+        for mode in assisted:
             e = s["tasks"][task][mode]
             force, jitter = e["hand_force_reduction_pct"], e["jitter_improvement_pct"]
             print(
-                f"  {task:6} {MODES[mode].label:{width}}  "
+                f"  {task:7} {s['modes'][mode]:{width}}  "
                 f"{_pct(force['mean']):>7} (smallest {_pct(force['min']):>7})  "
                 f"{_pct(jitter['mean']):>7} (smallest {_pct(jitter['min']):>7})"
             )
-    held = s.get("hold_on_release") or {}
-    if held:
-        print("  hold-on-release, mean over operators (largest):")
-        for task, h in held.items():
-            std, losses, jump = h["contact_force_std_N"], h["contact_losses"], h["handback_jump_m"]
-            print(
-                f"  {task:6} contact force std {_num(std['mean'])} N ({_num(std['max'])}), "
-                f"contact losses {_num(losses['mean'])} ({_num(losses['max'])}), "
-                f"hand-back jump {_num(_mm(jump['mean']))} mm ({_num(_mm(jump['max']))})"
-            )
+    print("  targets (met / not met / not judged):")
+    for mode in assisted:
+        t = s["targets"][mode]
+        flags = {
+            "effort": t["hand_force_reduction_met"],
+            "jitter": t["jitter_improvement_met"],
+            "hold": t.get("hold_met", "n/a"),
+            "recovery": t["recovery_met"],
+            "release": t["release_met"],
+        }
+        print(
+            f"  {s['modes'][mode]:{width}}  "
+            + ", ".join(f"{k} {_judged(v)}" for k, v in flags.items())
+        )
     for line in s["failed_runs"][:5]:
         print(f"hoh-cosim: failed: {line}", file=sys.stderr)
     print(f"wrote {result.out / 'index.html'}")
+    if args.figures:
+        print(f"wrote {args.figures}")
     return EXIT_FAILED if s["failed_runs"] else EXIT_OK
+
+
+def _judged(flag: object) -> str:
+    return {True: "met", False: "not met", None: "not judged"}.get(flag, str(flag))  # type: ignore[call-overload]
 
 
 def run_command(args: argparse.Namespace) -> int | None:

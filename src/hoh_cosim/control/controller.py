@@ -100,12 +100,14 @@ class ControllerParams:
         "probe_period_s": "s",
         "touch_down_N": "N",
         "lift_off_N": "N",
+        "compensation_onset_N": "N",
     }
     TUNABLE: ClassVar[frozenset[str]] = frozenset(
         {
             "translation",
             "rotation",
             "contact_compensation",
+            "compensation_onset_N",
             "contact_torque",
             "virtual_fixture",
             "fixture_threshold_N",
@@ -127,6 +129,11 @@ class ControllerParams:
     translation: AdmittanceGains = TRANSLATION_GAINS
     rotation: AdmittanceGains = ROTATION_GAINS
     contact_compensation: bool = True  # eq. 11–12
+    # [N] eq. 11-12 takes the probe force in full from this size on, none of it under half of it,
+    # in proportion between: what the housing's play leaves in the probe sensor's reading (up to
+    # 0.8 N per axis, seed 3.B.2; 0.5-0.7 N in the air after a probe check) then moves nothing in
+    # the air, where in full it made the robot creep at a few mm/s (0: in full, the seed's)
+    compensation_onset_N: float = 0.0
     # ... and the contact's moment out of the torque (the estimator's tau_probe_B)
     contact_torque: bool = True
     virtual_fixture: bool = False  # 3.F.3
@@ -144,9 +151,10 @@ class ControllerParams:
     glide: GlideParams = field(default_factory=GlideParams)  # eq. 10 lighter for a steady push
     recovery: RecoveryParams = field(default_factory=RecoveryParams)  # the contact lost: back
     # [N] the probe force above which the hand guides in contact (mode CONTACT), and under which
-    # the probe has left the patient (FREE)
-    touch_down_N: float = 1.0
-    lift_off_N: float = 0.5
+    # the probe has left the patient (FREE): above what the housing's play leaves in the probe
+    # sensor's reading in the air (0.2-0.8 N per axis, seed 3.B.2; 0.5-0.7 N after a probe check)
+    touch_down_N: float = 2.0
+    lift_off_N: float = 1.5
     use_probe: bool = True  # False: no probe sensor (no compensation, fixture or force limits)
     ft_period_s: float = 0.005  # [s] expected FT-150 packet period (seed: 5 ms)
     probe_period_s: float = 0.02  # [s] expected FSE103 packet period (50 Hz)
@@ -163,11 +171,8 @@ class ControllerParams:
                 f"got {self.fixture_normal!r}"
             )
         object.__setattr__(self, "fixture_up_B", as_unit_vector(self.fixture_up_B, "fixture_up_B"))
-        object.__setattr__(
-            self,
-            "fixture_threshold_N",
-            as_scalar(self.fixture_threshold_N, "fixture_threshold_N", low=0.0),
-        )
+        for name in ("fixture_threshold_N", "compensation_onset_N"):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         for name in ("ft_period_s", "probe_period_s", "touch_down_N", "lift_off_N"):
             object.__setattr__(
                 self, name, as_scalar(getattr(self, name), name, low=0.0, low_open=True)
@@ -269,7 +274,7 @@ class HandGuidingController:
         self._pipelines, self._rests = _pipelines(self, p)
         compensated = p.use_probe and p.contact_compensation
         raw = p.release.enabled or p.hold.enabled  # the detectors that read the raw packet
-        self._reading = (compensated, p.contact_torque, p.use_probe, raw)
+        self._reading = (compensated, p.contact_torque, p.use_probe, raw, p.compensation_onset_N)
         self._brake_accel = frozen([p.limits.max_brake_accel])
 
     def reset(self) -> None:

@@ -219,6 +219,10 @@ class HoldParams:
     contact_N: float = 2.0  # [N] probe force that counts as contact for a hold
     max_force_N: float = 18.0  # [N] the highest setpoint, under the supervisor's 20 N soft cap
     engage_s: float = 0.5  # [s] the hand asks for nothing this long in contact: hold
+    # the quiet hand must also have the law's request at rest: glide moves the probe under eq.
+    # 10's deadband, so a hand steering lightly is inside the quiet band and would be held (False:
+    # the band alone)
+    engage_at_rest: bool = False
     # [s] in contact this long before anything engages a hold: the probe touching down bounces,
     # and the hand's push falling then reads as a release (the rehearsal's press: at 0.1 s)
     settle_s: float = 1.0
@@ -554,9 +558,11 @@ class ContactHold:
         axis_B: Vec3,
         F_probe_B: Vec3,
         released_in_contact: bool,
+        asking: bool = False,
     ) -> bool:
         """While off: whether to engage now (module docstring): a release in contact, or the hand
-        quiet (F̃ inside the quiet band) in contact for `engage_s`. Keeps the setpoint's window."""
+        quiet (F̃ inside the quiet band, and with `engage_at_rest` the law's request at rest:
+        `asking` False) in contact for `engage_s`. Keeps the setpoint's window."""
         p = self.params
         contact = float(F_probe_B.dot(F_probe_B)) > p.contact_N * p.contact_N
         if not contact or not axis_B.any():
@@ -570,7 +576,9 @@ class ContactHold:
             return False
         if released_in_contact:
             return True
-        if _split_norm(F, axis_B, self._band(deadband), p.axial_band_N) > 1.0:
+        if (p.engage_at_rest and asking) or _split_norm(
+            F, axis_B, self._band(deadband), p.axial_band_N
+        ) > 1.0:
             self._quiet_since = None
             return False
         if self._quiet_since is None:

@@ -21,9 +21,10 @@ last surface normal at a capped speed until it touches again. Here:
     taken      the hand pulls the probe back out (F̃ · d below -`pull_N`): the hand has it
 
 A loss is told by the hold's own guards while it holds (`hoh_cosim.control.hold`), and while the
-hand scans by the contact's watch (`hoh_cosim.control.guidance.detectors`): the probe force under the
-controller's `lift_off_N` for `loss_s` while neither the hand pulled (F̃ along the probe below -`pull_N`) nor the
-tip moved `loss_m` out along the probe: a hand lifting the probe off does one or the other. Off by
+hand scans by the contact's watch (`hoh_cosim.control.guidance.detectors`): after a contact of at least `established_s`, the probe
+force under the controller's `lift_off_N` for `loss_s` while neither the hand pulled (F̃ along the
+probe below -`pull_N`) nor the tip moved `loss_m` out along the probe: a hand lifting the probe
+off does one or the other. Off by
 default; the `clinical` preset has it (docs/decisions).
 """
 
@@ -52,6 +53,7 @@ class RecoveryParams:
         "max_s": "s",
         "normal_tau_s": "s",
         "pull_N": "N",
+        "established_s": "s",
         "loss_s": "s",
         "loss_m": "m",
     }
@@ -66,12 +68,15 @@ class RecoveryParams:
     max_s: float = 3.0  # [s] the longest it looks for the contact
     normal_tau_s: float = 1.0  # [s] the normal's low-pass (a few friction reversals)
     pull_N: float = 0.5  # [N] F̃ against the approach beyond this: the hand pulls the probe out
+    # [s] under the hand, only a contact that lasted this long can be lost (a finger's push on the
+    # tip, a touch-down's bounce is none)
+    established_s: float = 1.0
     # under the hand, the probe force under the controller's lift_off_N (no contact) for loss_s ...
     loss_s: float = 0.2  # [s] (the hold's guards' figure) ...
     loss_m: float = 0.003  # [m] ... with the tip moved less than this out along the probe
 
     def __post_init__(self) -> None:
-        for name in ("confirm_s", "pull_N"):
+        for name in ("confirm_s", "pull_N", "established_s"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         for name in (
             "speed_m_s",

@@ -424,8 +424,13 @@ def _probe_check(components: dict[str, ComponentSpec], check_s: float, longer: b
     for name, spec in components.items():
         if spec.kind.name != "operator" or spec.params.probe_check_s > 0.0:
             continue
+        # the task's clock moves: its start and the one time given on the run's clock (the
+        # push_release task's release)
         params = dataclasses.replace(
-            spec.params, probe_check_s=check_s, start_s=spec.params.start_s + check_s
+            spec.params,
+            probe_check_s=check_s,
+            start_s=spec.params.start_s + check_s,
+            release_s=spec.params.release_s + check_s,
         )
         components[name] = dataclasses.replace(spec, params=params)
         extra = check_s if longer else 0.0

@@ -259,9 +259,13 @@ def figure_lines(figures: Mapping[str, Any] | None) -> list[str]:
     if hold is not None:
         lines.append(f"hands-off contact force std at most {hold:.2f} N, {losses} losses")
     back, peak = figures.get("recovery_time_s_max"), figures.get("recovery_peak_N_max")
-    if back is not None:
+    never = figures.get("recovery_never_back") or 0
+    if never:
+        lines.append(f"after the patient moved away the contact never came back in {never} runs")
+    elif back is not None:
         lines.append(f"contact back within {back:.2f} s of a loss, at most {peak:.1f} N")
     drift, settle = figures.get("release_drift_mm"), figures.get("release_settle_ms")
     if drift is not None:
-        lines.append(f"release: {drift:.2f} mm of drift, settled in {settle:.0f} ms")
+        settled = "never settled" if settle is None else f"settled in {settle:.0f} ms"
+        lines.append(f"release: {drift:.2f} mm of drift, {settled}")
     return lines

@@ -161,7 +161,8 @@ class HoldWatch:
         if not self.enabled or axis is None:
             return None
         in_contact = mode == Mode.BRAKING and self._released_in_contact
-        if self.hold.watch(tick.t, tick.F, self.deadband, axis, tick.F_probe, in_contact):
+        asking = bool(tick.request.any())
+        if self.hold.watch(tick.t, tick.F, self.deadband, axis, tick.F_probe, in_contact, asking):
             return Event.HOLD_READY
         return None
 
@@ -262,9 +263,9 @@ class RecoveryWatch:
 
 class ContactWatch:
     """The probe on or off the patient: TOUCH_DOWN above `touch_down_N`, LIFT_OFF under
-    `lift_off_N`. With the recovery on, a contact that ends under the hand is a loss
-    (CONTACT_LOST) unless the hand lifted the probe: it pulled it out, or the tip moved out along
-    the probe (`hoh_cosim.control.recovery`, module docstring)."""
+    `lift_off_N`. With the recovery on, a contact of at least its `established_s` that ends under
+    the hand is a loss (CONTACT_LOST) unless the hand lifted the probe: it pulled it out, or the tip
+    moved out along the probe (`hoh_cosim.control.recovery`, module docstring)."""
 
     modes = GUIDING
 
@@ -284,9 +285,10 @@ class ContactWatch:
             self._lost_at = None
             return None
         axis = tick.axis
-        if not self.enabled or axis is None or not axis.any():
-            return Event.LIFT_OFF
         p = self.recovery.params
+        established = tick.t - self._since >= p.established_s - 1e-9
+        if not (self.enabled and established) or axis is None or not axis.any():
+            return Event.LIFT_OFF
         if self._lost_at is None:
             self._lost_at, self._lost_z = tick.t, float(tick.p_BT.dot(axis))
         pulled = float(tick.F.dot(axis)) < -p.pull_N
@@ -302,7 +304,10 @@ class ContactWatch:
     def enter(self, mode: Mode, previous: Mode, tick: Tick) -> None:
         if mode != Mode.CONTACT:
             self._lost_at = None
+        elif previous == Mode.FREE:  # a new contact (not the hand taking over from the robot)
+            self._since = tick.t
 
     def reset(self) -> None:
         self._lost_at: float | None = None
         self._lost_z = 0.0
+        self._since = 0.0  # when the contact began

@@ -4,6 +4,7 @@ stage (`Stage`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Protocol
 
@@ -22,7 +23,8 @@ class Tick:
     On a tick with a stop flag only the time, the flags and the last command are read.
 
     F, tau        F̃ and τ̃: the estimated hand force and torque, in B, with the contact's force
-                  and moment taken out (eq. 11-12) where contact compensation is on
+                  and moment taken out (eq. 11-12) where contact compensation is on (beyond the
+                  play, with an onset)
     F_raw         the newest unfiltered wrist packet, compensated the same way (None: not wired,
                   or nothing reads it)
     F_meas        ... as it came (hand and contact), or None
@@ -58,7 +60,7 @@ class Tick:
     )
 
     def __init__(self) -> None:
-        self.start(0.0, 0.0, 1, (ZERO3, ZERO3), {}, (False, False, False, False))
+        self.start(0.0, 0.0, 1, (ZERO3, ZERO3), {}, (False, False, False, False, 0.0))
 
     def start(
         self,
@@ -67,30 +69,35 @@ class Tick:
         status: int,
         last: tuple[Vec3, Vec3],
         inputs: Mapping[str, Vec],
-        reading: tuple[bool, bool, bool, bool],
+        reading: tuple[bool, bool, bool, bool, float],
     ) -> None:
         """A new tick (one object serves every tick of a controller). Its forces only without a
         stop flag (a stop's inputs may be non-finite); `reading`: contact compensation, the
-        contact's torque, a probe sensor, and the compensated raw packet (which only the release
-        detector and the hold read)."""
+        contact's torque, a probe sensor, the compensated raw packet (which only the release
+        detector and the hold read), and the compensation's onset (`ControllerParams`)."""
         self.t, self.dt, self.status = t, dt, status
         self.v_last, self.w_last = last
         self.request = _ZERO6
         if status:
             return
-        compensated, contact_torque, use_probe, raw = reading
+        compensated, contact_torque, use_probe, raw, onset = reading
         F_probe = inputs["F_probe_B"]
         F, tau = inputs["F_hand_B"], inputs["tau_hand_B"]
         F_meas = inputs.get("F_hand_meas_B")
         F_raw = F_meas if raw else None
         if compensated:
-            F = contact_compensated(F, F_probe)
             tau_probe = inputs.get("tau_probe_B")
+            F_c = F_probe
+            if onset > 0.0:  # the probe force's part: none under onset / 2, all from onset on
+                w = min(max(2.0 * math.sqrt(float(F_probe.dot(F_probe))) / onset - 1.0, 0.0), 1.0)
+                F_c = w * F_probe
+                tau_probe = None if tau_probe is None else w * tau_probe
+            F = contact_compensated(F, F_c)
             if contact_torque and tau_probe is not None:
                 # τ̃ = τ_hand - p_RT × F_probe: the contact's moment is not the hand's
                 tau = tau - tau_probe
             if F_raw is not None:
-                F_raw = contact_compensated(F_raw, F_probe)
+                F_raw = contact_compensated(F_raw, F_c)
         self.F, self.tau, self.F_raw, self.F_meas = F, tau, F_raw, F_meas
         self.F_probe = F_probe
         self.probe = F_probe if use_probe else None
