@@ -152,7 +152,7 @@ def test_a_clean_session_guides_the_robot_and_logs_every_cycle(tmp_path):
     assert np.ptp(p[:, 0]) > 0.01
     assert len(outcome.log.messages["/command"]) == result.cycles
     events = [m["event"] for m in outcome.log.messages["/events"]]
-    assert events == ["rebias", "parameters", "end"]
+    assert events == ["rebias", "parameters", "mode", "end"]  # the mode: guiding once rebiased
     assert not outcome.after.program_running  # stopped at the end too
     assert outcome.probe.parser.framing == "seed18"
 
@@ -571,6 +571,7 @@ def test_hold_on_release_on_a_breathing_phantom_takes_over_and_gives_back(tmp_pa
     follows the breath (announced, logged, FOLLOWING), never while it holds."""
     from hoh_cosim.control.controller import ControllerParams
     from hoh_cosim.control.follow import FollowParams
+    from hoh_cosim.control.guidance.modes import Mode
     from hoh_cosim.control.hold import HoldParams
     from hoh_cosim.control.release import ReleaseParams
     from hoh_cosim.control.supervisor import Status
@@ -613,8 +614,12 @@ def test_hold_on_release_on_a_breathing_phantom_takes_over_and_gives_back(tmp_pa
     assert said.index(follows[0]) < said.index(takes[0])  # the hand steered in contact first
     log = read_session(log_path)
     assert log.complete
-    assert [m["detail"] for m in log.messages["/events"] if m["event"] == "hold"]
+    modes = [m["detail"] for m in log.messages["/events"] if m["event"] == "mode"]
+    assert any(d.startswith("contact -> holding: ") for d in modes), modes
+    assert any(d.startswith("handing_back -> contact: ") for d in modes), modes
     assert [m["detail"] for m in log.messages["/events"] if m["event"] == "follow"]
+    logged = np.array([m["mode"] for m in log.messages["/command"]])
+    assert set(logged.tolist()) >= {int(Mode.CONTACT), int(Mode.HOLDING), int(Mode.HANDING_BACK)}
     status = np.array([m["status"] for m in log.messages["/command"]])
     holding = (status & int(Status.HOLDING)) != 0
     following = (status & int(Status.FOLLOWING)) != 0

@@ -127,7 +127,8 @@ def test_the_rehearsal_recorded_a_whole_clean_session(rehearsal, log):
     session = read_session(log)
     assert session.complete is True
     assert len(session.messages["/command"]) == CYCLES
-    assert [e["event"] for e in session.messages["/events"]] == ["rebias", "parameters", "end"]
+    events = [e["event"] for e in session.messages["/events"]]
+    assert events == ["rebias", "parameters", "mode", "end"]  # the mode: guiding once rebiased
 
 
 # --- replaying as recorded ------------------------------------------------------------------------

@@ -24,6 +24,7 @@ import pytest
 
 pytest.importorskip("mcap")
 
+from hoh_cosim.control.guidance.modes import Mode
 from hoh_cosim.errors import InputFileError, RunError
 from hoh_cosim.hardware.log_check import invalid_messages
 from hoh_cosim.hardware.session_log import (
@@ -111,6 +112,7 @@ def row_values(i: int) -> dict[str, Any]:
         "/fse103.count": probe_count(i),
         "/fse103.device_ms": -1 if i % 5 == 0 else 123456 + 10 * i,
         "/command.status": STATUSES[i % len(STATUSES)][0],
+        "/command.mode": i % 7,
     }
     bools = {
         "/robot.protective_stop": i % 7 == 3,
@@ -155,6 +157,7 @@ def expected_messages(i: int) -> dict[str, dict[str, Any]]:
         else:  # integers and booleans
             message[name] = value
     out["/command"]["status_text"] = STATUSES[i % len(STATUSES)][1]
+    out["/command"]["mode_text"] = Mode(i % 7).label
     return out
 
 
@@ -210,7 +213,7 @@ def assert_constant(message: dict[str, Any], topic: str) -> None:
     k = message["k"]
     assert message["t"] == float(k), message
     for name, value in message.items():
-        if name in ("k", "t", "status_text"):
+        if name in ("k", "t", "status_text", "mode_text"):
             continue
         kind = CHANNELS[topic][name]["type"]
         if kind == "array":
@@ -440,6 +443,13 @@ def test_json_types_follow_the_schema(session):
                 else:
                     expected = {"integer": int, "boolean": bool, "string": str}[kind]
                     assert type(value) is expected, (topic, name, value)
+
+
+def test_mode_text_names_the_mode(session):
+    modes = {message["mode"] for message in session.messages["/command"]}
+    assert modes == set(range(7))
+    for message in session.messages["/command"]:
+        assert message["mode_text"] == Mode(message["mode"]).label
 
 
 def test_status_text_names_the_flags(session):

@@ -5,7 +5,7 @@
     hoh-cosim hw calibrate CONFIG.yaml [--out FILE] [--samples N] [--tilts N] [--directions N]
     hoh-cosim hw sensors [--ft HOST[:PORT]] [--probe DEVICE] [--seconds S] [--json]
     hoh-cosim hw rehearse [--seconds S] [--task TASK] [--rate HZ] [--fault KIND@SECONDS ...]
-                          [--breathing MM] [--let-go S+D] [--preset NAME|FILE]
+                          [--breathing MM] [--let-go S+D] [--away MM@S[/D]] [--preset NAME|FILE]
     hoh-cosim hw emulate [--host 127.0.0.1] [--series e|cb3] [--seconds N] [--allow-remote]
     hoh-cosim hw campaign [--runs N] [--seed S] [--workers W] [--out DIR] [--kinds K,K,...]
     hoh-cosim replay LOG.mcap [--preset NAME|FILE] [--set block.parameter=value ...] [--out DIR]
@@ -74,6 +74,29 @@ def _let_go(text: str) -> tuple[float, float]:
     if not (plus and math.isfinite(at_s + off_s) and at_s > 0.0 and off_s > 0.0):
         raise argparse.ArgumentTypeError(f"expected seconds > 0 and a duration > 0, got {text!r}")
     return at_s, at_s + off_s
+
+
+def _away(text: str) -> tuple[float, float, float]:
+    """MM@S[/D]: the patient moves MM mm away S s after the hand took the handle, within D s."""
+    size, at, rest = text.partition("@")
+    when, _, within = rest.partition("/")
+    try:
+        mm, at_s, time_s = float(size), float(when), float(within or 0.3)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected MM@SECONDS or MM@SECONDS/DURATION, got {text!r}"
+        ) from None
+    if not (
+        at
+        and math.isfinite(mm + at_s + time_s)
+        and 0.0 < mm <= 100.0
+        and at_s > 0.0
+        and time_s > 0.0
+    ):
+        raise argparse.ArgumentTypeError(
+            f"expected 0 to 100 mm, seconds > 0 and a duration > 0, got {text!r}"
+        )
+    return 1e-3 * mm, at_s, time_s
 
 
 def _rt_priority(text: str) -> int | None:
@@ -246,6 +269,15 @@ def add_commands(sub: Any) -> None:
         help="the hand lets go of the handle S s after it took it and takes it again D s later, "
         "e.g. 6+8: with --set controller.hold.enabled=true the robot holds the contact force "
         "meanwhile (hold-on-release)",
+    )
+    rehearse.add_argument(
+        "--away",
+        type=_away,
+        default=None,
+        metavar="MM@S[/D]",
+        help="the patient moves MM mm away from the probe S s after the hand took the handle, "
+        "within D s (default 0.3), e.g. 15@12: with --preset clinical the robot brings the "
+        "contact back (a contact task)",
     )
     rehearse.add_argument(
         "--rate",
@@ -584,6 +616,12 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         raise ConfigError(f"--breathing: expected millimetres from 0 to 30, got {args.breathing:g}")
     from hoh_cosim.presets import DEFAULT_PRESET, load_preset
 
+    if args.away and phantom is None:
+        raise ConfigError(
+            f"--away: a patient to move away needs a contact task "
+            f"({', '.join(CONTACT_TASKS)}), got --task {args.task}"
+        )
+    away_m, away_s, away_time_s = args.away or (0.0, 0.0, 0.3)
     let_go, retake = args.let_go or (0.0, 0.0)
     preset = load_preset(args.preset or DEFAULT_PRESET)
     estimator, controller = _rehearsal_params(args.overrides, preset)
@@ -598,6 +636,9 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         breathing_m=1e-3 * args.breathing,
         let_go_s=let_go,
         retake_s=retake,
+        away_m=away_m,
+        away_s=away_s,
+        away_time_s=away_time_s,
         realtime_priority=args.rt_priority,
         ur_host=args.ur_emulator,
         estimator=estimator,

@@ -6,7 +6,9 @@
     command    HandGuidingController.step
     verdict    the supervisor: send the command, send zero, or end the session with the cause
     events     the probe check ending, the probe sensor drifting away from the wrist or back, the
-               robot taking the probe over (hold-on-release) and giving it back
+               controller's mode changing (the robot taking the probe over and giving it back, a
+               lost contact recovered; `MODE_GAP_S` apart at most one line), the robot following
+               the breath or no longer (at most one line a breath, `FOLLOW_GAP_S`)
 
 The caller does the I/O around it: the runner reads the robot and the mailboxes and writes speedL and
 the log, replay reads a session log. The packet periods and whether there is a probe sensor are
@@ -23,12 +25,29 @@ import numpy as np
 
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
+from hoh_cosim.control.guidance.modes import GUIDING, HOLD_MODES, Mode
 from hoh_cosim.control.hold import HoldEnd
 from hoh_cosim.control.supervisor import SessionPolicy, Status, Verdict, supervise
 from hoh_cosim.control.vectors import Rot3, Vec, Vec3, as_scalar
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["ControlBlocks", "Cycle", "Event", "Reading", "SensorSetup", "control_cycle"]
+__all__ = [
+    "FOLLOW_GAP_S",
+    "MODE_GAP_S",
+    "ControlBlocks",
+    "Cycle",
+    "Event",
+    "Reading",
+    "SensorSetup",
+    "control_cycle",
+]
+
+MODE_GAP_S = 0.5
+"""[s] The mode's announcements are at least this far apart: changes within it are told as one,
+the mode it ended in (a contact's edge that flickers, a stale stream's gaps)."""
+FOLLOW_GAP_S = 4.0
+"""[s] The follow's announcements are at least this far apart: about a breath (the follow's own
+`level_s`), which it may begin and end with."""
 
 
 @dataclass(frozen=True)
@@ -149,8 +168,10 @@ class ControlBlocks:
         # the probe check, if any, runs from the first cycle on (the rebias is over by then)
         self.checking = estimator.checking and policy.probe is not None
         self.drifted = False
-        self.holding = False  # hold-on-release has the probe (announced)
-        self.following = False  # the breath is followed (announced)
+        self.mode = Mode.STOPPED  # the controller's mode, as last announced
+        self.modes = _Limited(MODE_GAP_S)
+        self.following = False  # the breath is followed (as last announced)
+        self.follows = _Limited(FOLLOW_GAP_S)
         # reused every cycle: the estimator reads them during its step only
         self._ft_counter = np.zeros(1)
         self._probe_counter = np.zeros(1)
@@ -192,7 +213,7 @@ def control_cycle(
     )
     command = controller.step(t, dt, {**estimate, "p_BT_B": reading.p_BT_B})
     events = _session_events(blocks, estimate)
-    for event in (_hold_event(blocks), _follow_event(blocks)):
+    for event in (_mode_event(blocks, t), _follow_event(blocks, t)):
         if event is not None:
             events.append(event)
     verdict = supervise(
@@ -233,32 +254,71 @@ def _session_events(blocks: ControlBlocks, estimate: dict[str, Vec]) -> list[Eve
     return events
 
 
-def _hold_event(blocks: ControlBlocks) -> Event | None:
-    """The robot took the probe over (hold-on-release engaged) or gave it back, if it did in this
-    cycle: one line for the operator, and the log's "hold" event."""
-    hold = blocks.controller.hold
-    if hold.active == blocks.holding:
+class _Limited:
+    """Announcements at least `gap_s` apart: a change within the gap waits for its end, and is
+    told then if the state it settled in is not the one last told."""
+
+    def __init__(self, gap_s: float) -> None:
+        self.gap_s = gap_s
+        self.told = -float("inf")  # when the last announcement was made
+
+    def due(self, t: float, changed: bool) -> bool:
+        """Whether to announce now: the state differs from the one told (`changed`) and the gap
+        since the last announcement is over."""
+        if not changed or t - self.told < self.gap_s - 1e-9:
+            return False
+        self.told = t
+        return True
+
+
+def _mode_event(blocks: ControlBlocks, t: float) -> Event | None:
+    """The controller's mode changed since it was last told, `MODE_GAP_S` after that at the
+    earliest: one line for the operator, and the log's "mode" event (with what the robot does,
+    the hold's level, why a hold ended)."""
+    controller = blocks.controller
+    mode, before = controller.mode, blocks.mode
+    if not blocks.modes.due(t, mode != before):
         return None
-    blocks.holding = hold.active
-    if hold.active:
+    blocks.mode = mode
+    detail = f"{before.name.lower()} -> {mode.name.lower()}: {mode.label}"
+    hold = controller.hold
+    if mode == Mode.HOLDING:
         text = (
             f"holding the probe's contact force at {hold.target_N:.1f} N along the probe "
             f"(hold {hold.holds})"
         )
-        return Event("hold", text, f"ROBOT HOLDS: {text}; touch the handle to take the probe back")
-    if hold.ended == HoldEnd.HANDED_BACK:
+        announcement = f"ROBOT HOLDS: {text}; touch the handle to take the probe back"
+        if before == Mode.RECOVERING:
+            announcement = f"CONTACT BACK: {announcement}"
+    elif mode in GUIDING and before in HOLD_MODES:
         text = "handed back to the hand"
-        return Event("hold", text, "HAND HAS THE PROBE: the robot handed back")
-    why = _HOLD_ENDS.get(hold.ended, hold.ended.name.lower())
-    text = f"hold ended: {why}; at rest until the hand pushes"
-    return Event("hold", text, f"ROBOT STOPS HOLDING: {why}; at rest until the hand pushes")
+        announcement = "HAND HAS THE PROBE: the robot handed back"
+    elif mode == Mode.RECOVERING:
+        p = controller.recovery.params
+        text = (
+            f"bringing the probe back along the surface's normal at {1e3 * p.speed_m_s:g} mm/s "
+            f"(at most {1e3 * p.max_travel_m:g} mm, {p.max_s:g} s)"
+        )
+        announcement = f"CONTACT LOST: {text}"
+    elif mode == Mode.BRAKING and before in HOLD_MODES:
+        why = _HOLD_ENDS.get(hold.ended, hold.ended.name.lower())
+        text = f"hold ended: {why}; at rest until the hand pushes"
+        announcement = f"ROBOT STOPS HOLDING: {why}; at rest until the hand pushes"
+    elif mode == Mode.BRAKING and before == Mode.RECOVERING:
+        text = "no contact within the recovery's travel and time; at rest until the hand pushes"
+        announcement = f"CONTACT NOT FOUND: {text}"
+    else:
+        text = mode.label
+        announcement = f"robot: {text}"
+    return Event("mode", f"{detail}; {text}", announcement)
 
 
-def _follow_event(blocks: ControlBlocks) -> Event | None:
-    """The robot began following the patient's breath along the probe, or stopped, if it did in
-    this cycle: one line for the operator, and the log's "follow" event."""
+def _follow_event(blocks: ControlBlocks, t: float) -> Event | None:
+    """The robot began following the patient's breath along the probe, or stopped, since it was
+    last told, `FOLLOW_GAP_S` after that at the earliest: one line for the operator, and the log's
+    "follow" event."""
     follow = blocks.controller.follow
-    if follow.active == blocks.following:
+    if not blocks.follows.due(t, follow.active != blocks.following):
         return None
     blocks.following = follow.active
     if follow.active:

@@ -156,6 +156,7 @@ class HoldParams:
         "contact_N": "N",
         "max_force_N": "N",
         "engage_s": "s",
+        "engage_still_m": "m",
         "settle_s": "s",
         "window_s": "s",
         "ramp_N_s": "N/s",
@@ -219,10 +220,10 @@ class HoldParams:
     contact_N: float = 2.0  # [N] probe force that counts as contact for a hold
     max_force_N: float = 18.0  # [N] the highest setpoint, under the supervisor's 20 N soft cap
     engage_s: float = 0.5  # [s] the hand asks for nothing this long in contact: hold
-    # the quiet hand must also have the law's request at rest: glide moves the probe under eq.
-    # 10's deadband, so a hand steering lightly is inside the quiet band and would be held (False:
-    # the band alone)
-    engage_at_rest: bool = False
+    # [m] the quiet hand must also have kept the probe within this across its axis over the last
+    # engage_s: glide moves the probe under eq. 10's deadband, so a hand steering it lightly over
+    # the skin is inside the quiet band and would be held (0: the band alone)
+    engage_still_m: float = 0.0
     # [s] in contact this long before anything engages a hold: the probe touching down bounces,
     # and the hand's push falling then reads as a release (the rehearsal's press: at 0.1 s)
     settle_s: float = 1.0
@@ -238,6 +239,9 @@ class HoldParams:
     touch_tau_s: float = 0.5  # [s] across the axis, F̃'s reference follows it this slowly
     # [s] the touch's band widened by the probe's force range over this long (`_swing`); 0: off
     swing_s: float = 0.0
+    # ... along the probe too, by the range along it (a contact that comes back fast after the
+    # patient moved away reads as F̃ along the probe for as long; False: across only)
+    swing_along: bool = False
     blend_s: float = 0.2  # [s] the hand-back's blend
     # [N] the retake's band along the probe (module docstring); 0: no retake. The clinical study's
     # hold, after a probe check, sets 1 N: F̃·a with nobody's hand read -0.6 to +0.6 N there
@@ -274,6 +278,7 @@ class HoldParams:
             "share_rest_s",
             "share_min_N",
             "engage_s",
+            "engage_still_m",
             "settle_s",
             "confirm_s",
             "blend_s",
@@ -558,11 +563,12 @@ class ContactHold:
         axis_B: Vec3,
         F_probe_B: Vec3,
         released_in_contact: bool,
-        asking: bool = False,
+        moved_m: float = 0.0,
     ) -> bool:
         """While off: whether to engage now (module docstring): a release in contact, or the hand
-        quiet (F̃ inside the quiet band, and with `engage_at_rest` the law's request at rest:
-        `asking` False) in contact for `engage_s`. Keeps the setpoint's window."""
+        quiet (F̃ inside the quiet band, and with `engage_still_m` the probe kept within it across
+        its axis: `moved_m` over the last `engage_s`) in contact for `engage_s`. Keeps the
+        setpoint's window."""
         p = self.params
         contact = float(F_probe_B.dot(F_probe_B)) > p.contact_N * p.contact_N
         if not contact or not axis_B.any():
@@ -576,7 +582,7 @@ class ContactHold:
             return False
         if released_in_contact:
             return True
-        if (p.engage_at_rest and asking) or _split_norm(
+        if (0.0 < p.engage_still_m < moved_m) or _split_norm(
             F, axis_B, self._band(deadband), p.axial_band_N
         ) > 1.0:
             self._quiet_since = None
@@ -661,7 +667,9 @@ class ContactHold:
         if was:
             self.ended = HoldEnd.STOPPED
 
-    def _touch(self, dt: float, F: Vec3, a: Vec3, band: Vec3, which: int) -> float:
+    def _touch(
+        self, dt: float, F: Vec3, a: Vec3, band: Vec3, which: int, axial: float | None = None
+    ) -> float:
         """F̃'s departure against the quiet band (> 1: a touch), module docstring.
 
         `wrist`: F̃ away from its value at the engagement and from nothing (the hand opening, F̃
@@ -673,12 +681,14 @@ class ContactHold:
         follows F̃ with `touch_tau_s` (slow changes are the contact's: the misreading across the
         axis grows with the force the hold keeps through the breaths) but stays within one band
         of F̃ at the engagement, so that a hand pushing slowly sideways is heard once it pushes
-        two bands. `which`: 0 the filtered F̃, 1 the raw one."""
+        two bands. `which`: 0 the filtered F̃, 1 the raw one; `axial` the band along the axis
+        (default `axial_band_N`)."""
         p = self.params
+        axial = p.axial_band_N if axial is None else axial
         if p.force_source != "combined":
             return min(
-                _split_norm(F - self._F0, a, band, p.axial_band_N),
-                _split_norm(F, a, band, p.axial_band_N),
+                _split_norm(F - self._F0, a, band, axial),
+                _split_norm(F, a, band, axial),
             )
         along = float(F.dot(a))
         low = self._low[which] = min(self._low[which], along)
@@ -688,7 +698,7 @@ class ContactHold:
         ref = ref + (across - ref) * min(dt / p.touch_tau_s, 1.0)
         F0 = self._F0 - float(self._F0.dot(a)) * a
         self._ref[which] = np.minimum(np.maximum(ref, F0 - band), F0 + band)
-        return max(n_across, (along - low) / p.axial_band_N)
+        return max(n_across, (along - low) / axial)
 
     def _retake(self, t: float, push: float, c_probe: float) -> None:
         """One tick of the retake (module docstring): `push` F̃·a, `c_probe` the probe's axial
@@ -847,10 +857,14 @@ class ContactHold:
         p = self.params
         a = self._axis
         band = self._band(deadband)
+        axial = None
         if p.swing_s > 0.0:
-            band = band + self._swing(t, F_probe_B)
-        n = self._n = self._touch(dt, F, a, band, 0)
-        raw = F_raw is None or self._touch(dt, F_raw, a, band, 1) > 1.0
+            swing = self._swing(t, F_probe_B)
+            band = band + swing
+            if p.swing_along:
+                axial = p.axial_band_N + abs(float(swing.dot(a)))
+        n = self._n = self._touch(dt, F, a, band, 0, axial)
+        raw = F_raw is None or self._touch(dt, F_raw, a, band, 1, axial) > 1.0
         if n > 1.0 and raw:
             if self._touch_since is None:
                 self._touch_since = t

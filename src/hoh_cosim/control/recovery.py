@@ -18,7 +18,8 @@ last surface normal at a capped speed until it touches again. Here:
                bounds the force meanwhile)
     gave up    the tip `max_travel_m` along d from p₀, or `max_s` since t₀, without the
                contact: the robot rests until the hand pushes
-    taken      the hand pulls the probe back out (F̃ · d below -`pull_N`): the hand has it
+    taken      under the hand, the hand pulls the probe back out (F̃ · d below -`pull_N` for
+               `pull_s`): the hand has it
 
 A loss is told by the hold's own guards while it holds (`hoh_cosim.control.hold`), and while the
 hand scans by the contact's watch (`hoh_cosim.control.guidance.detectors`): after a contact of at least `established_s`, the probe
@@ -53,21 +54,26 @@ class RecoveryParams:
         "max_s": "s",
         "normal_tau_s": "s",
         "pull_N": "N",
+        "pull_s": "s",
         "established_s": "s",
         "loss_s": "s",
         "loss_m": "m",
     }
 
     enabled: bool = False
-    # [m/s] the approach: a 15 mm gap closes in 0.75 s, and the force rises at about 24 N/s on
-    # 1200 N/m of tissue, 0.5 N for a 20 ms packet of the probe sensor
-    speed_m_s: float = 0.02
+    # [m/s] the approach: a 15 mm gap closes in 0.5 s, and the force rises at about 36 N/s on
+    # 1200 N/m of tissue, 0.7 N for a 20 ms packet of the probe sensor
+    speed_m_s: float = 0.03
     contact_N: float = 2.0  # [N] the probe force that counts as the contact back (the hold's)
     confirm_s: float = 0.03  # [s] ... held this long (a packet and a half at 50 Hz)
     max_travel_m: float = 0.03  # [m] the farthest the recovery moves the tip (twice a 15 mm loss)
     max_s: float = 3.0  # [s] the longest it looks for the contact
     normal_tau_s: float = 1.0  # [s] the normal's low-pass (a few friction reversals)
-    pull_N: float = 0.5  # [N] F̃ against the approach beyond this: the hand pulls the probe out
+    # [N] under the hand, F̃ against the approach beyond this for pull_s: the hand pulls the probe
+    # out (above F̃'s error with nobody's hand in the air, the play's 0.5-1 N, and its transients
+    # as the contact goes and comes: the two sensors' filters lag differently)
+    pull_N: float = 2.0
+    pull_s: float = 0.1
     # [s] under the hand, only a contact that lasted this long can be lost (a finger's push on the
     # tip, a touch-down's bounce is none)
     established_s: float = 1.0
@@ -76,7 +82,7 @@ class RecoveryParams:
     loss_m: float = 0.003  # [m] ... with the tip moved less than this out along the probe
 
     def __post_init__(self) -> None:
-        for name in ("confirm_s", "pull_N", "established_s"):
+        for name in ("confirm_s", "pull_N", "pull_s", "established_s"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), name, low=0.0))
         for name in (
             "speed_m_s",
@@ -108,6 +114,7 @@ class ContactRecovery:
         self._t0 = 0.0
         self._p0 = np.zeros(3)
         self._back_since: float | None = None
+        self._pull_since: float | None = None
 
     def observe(self, dt: float, F_probe_B: Vec3 | None, axis_B: Vec3 | None) -> None:
         """One tick outside a recovery: the normal follows the contact's direction."""
@@ -121,7 +128,9 @@ class ContactRecovery:
             self.normal = -axis_B if axis_B is not None and axis_B.any() else unit
         w = min(dt / self.params.normal_tau_s, 1.0)
         normal = self.normal + w * (unit - self.normal)
-        self.normal = normal / math.sqrt(float(normal.dot(normal)))
+        size = math.sqrt(float(normal.dot(normal)))
+        if size > 1e-9:  # (a contact exactly against the normal, half a time constant: kept)
+            self.normal = normal / size
 
     def start(self, t: float, p_BT_B: Vec3, axis_B: Vec3 | None, hands_off: bool) -> None:
         """An approach from the tip's position now along -n̂ (the probe axis if no contact was
@@ -132,7 +141,7 @@ class ContactRecovery:
         self.direction = -normal
         self.active, self.hands_off = True, hands_off
         self._t0, self._p0 = t, p_BT_B.copy()
-        self._back_since = None
+        self._back_since = self._pull_since = None
         self.recoveries += 1
 
     def stop(self) -> None:
@@ -153,11 +162,20 @@ class ContactRecovery:
         """Whether the approach went `max_travel_m` or `max_s` without the contact."""
         p = self.params
         travel = float((p_BT_B - self._p0).dot(self.direction))
-        return travel >= p.max_travel_m or t - self._t0 >= p.max_s - 1e-9
+        return travel >= p.max_travel_m - 1e-12 or t - self._t0 >= p.max_s - 1e-9
 
-    def pulled(self, F: Vec3) -> bool:
-        """Whether the hand pulls the probe back out: F̃ against the approach beyond `pull_N`."""
-        return float(F.dot(self.direction)) < -self.params.pull_N
+    def pulled(self, t: float, F: Vec3) -> bool:
+        """Whether the hand pulls the probe back out, in an approach under the hand: F̃ against the
+        approach beyond `pull_N` for `pull_s`. Hands off, no pull ends the approach: F̃'s errors
+        as the contact goes and comes are no hand (one who takes the handle meets the hold at the
+        contact, and a touch hands back)."""
+        p = self.params
+        if self.hands_off or float(F.dot(self.direction)) >= -p.pull_N:
+            self._pull_since = None
+            return False
+        if self._pull_since is None:
+            self._pull_since = t
+        return t - self._pull_since >= p.pull_s - 1e-9
 
     def command(self, v_request: Vec3) -> Vec3:
         """v: the hand's request across d, and along d the larger of the request and the approach

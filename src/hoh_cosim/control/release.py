@@ -104,6 +104,9 @@ class ReleaseParams:
     hold_s: how long the brake holds unless a firm push (‖F̂‖_η > reengage_factor) comes.
     reengage_factor: k_re, a push this many deadbands strong ends the hold at once.
     contact_threshold_N: probe contact force above which a release is RELEASED_CONTACT.
+    in_contact: False: the detector listens while the hand guides in the air only (the controller's
+        mode FREE); in contact a let-go is the hold's to tell (a quiet hand), and the contact's own
+        changes (the two sensors' filters lag differently) are no release.
     raw_band_N: [N] per base axis, the raw packet's noise band (the FT-150's max |noise|, about
         1.15, 1.06, 0.31 N, seed 4.C): inside max(η, this) a packet counts as "no push".
     """
@@ -127,6 +130,7 @@ class ReleaseParams:
     hold_s: float = 0.15
     reengage_factor: float = 2.0
     contact_threshold_N: float = 1.0
+    in_contact: bool = True
     raw_band_N: Vec3 = field(default_factory=lambda: frozen([1.15, 1.15, 0.31]))
 
     def __post_init__(self) -> None:

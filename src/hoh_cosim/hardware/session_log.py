@@ -9,7 +9,8 @@ so the file opens in Foxglove and in the `mcap` Python package alike:
     /ft150      a new raw wrench in S, how many samples so far, its receipt time
     /fse103     a new raw probe force in P, how many samples so far, receipt and device times
     /estimate   the estimator's outputs
-    /command    the controller's outputs and the twist sent, with the status flags' names
+    /command    the controller's outputs (its mode among them) and the twist sent, with the
+                status flags' names and the mode's
     /timing     the cycle's compute time and how late it started
     /events     what happened: the rebias, the parameters, a stop and its cause, the end
 
@@ -127,6 +128,7 @@ CYCLE_LAYOUT: tuple[tuple[str, str, int, dict[str, Any]], ...] = (
     ("/command", "twist_B", 6, _VECTOR),
     ("/command", "twist_law_B", 6, _VECTOR),
     ("/command", "status", 1, _INT),
+    ("/command", "mode", 1, _INT),
     ("/command", "sent_B", 6, _VECTOR),
     ("/timing", "compute_s", 1, _NUM),
     ("/timing", "late_s", 1, _NUM),
@@ -178,6 +180,10 @@ T0_KEY = "t0_unix_ns"
 _SAME_AS_COMMAND = ("twist_law_B", "sent_B")
 """The /command fields that are left out where they equal `twist_B` (the module's docstring)."""
 
+_MODES = frozenset(range(7))
+"""The controller's modes' values (`hoh_cosim.control.guidance.modes.Mode`); another is logged as
+its number, never a reason for the writer to fail."""
+
 ORPHANED_CAUSE = "the runner process ended without closing the log"
 """The `end` event's detail the writer gives when its runner is gone before saying how it ended."""
 
@@ -191,6 +197,7 @@ for _topic, _name, _size, _kind in CYCLE_LAYOUT:
     _field = {**_kind, "minItems": _size, "maxItems": _size} if _kind is _VECTOR else _kind
     CHANNELS.setdefault(_topic, {})[_name] = _field
 CHANNELS["/command"]["status_text"] = _STR
+CHANNELS["/command"]["mode_text"] = _STR
 CHANNELS["/events"] = {"event": _STR, "detail": _STR}
 
 NONFINITE = "nonfinite"
@@ -265,6 +272,7 @@ class CycleRecord:
         row.set("/command.twist_B", self.cycle.command["twist_B"])
         row.set("/command.twist_law_B", self.cycle.command["twist_law_B"])
         row.set("/command.status", int(verdict.status))
+        row.set("/command.mode", int(self.cycle.command["mode"][0]))
         row.set("/command.sent_B", verdict.twist_B)
         row.set("/timing.compute_s", self.compute_s)
         row.set("/timing.late_s", self.late_s)
@@ -366,6 +374,7 @@ def _messages(
         else:
             message[name] = _number(values[0], kind)
     if "/command" in out:
+        from hoh_cosim.control.guidance.modes import Mode
         from hoh_cosim.control.supervisor import Status
 
         command = out["/command"]
@@ -373,6 +382,8 @@ def _messages(
             if name in command and command[name] == command.get("twist_B"):
                 del command[name]
         command["status_text"] = Status(command["status"]).describe()
+        mode = command["mode"]
+        command["mode_text"] = Mode(mode).label if mode in _MODES else f"mode {mode}"
     return list(out.items())
 
 

@@ -142,6 +142,9 @@ class Rehearsal:
     breathing_m: float = 0.0  # the phantom breathes this deep (WorldSetup)
     let_go_s: float = 0.0  # the hand lets go this long after it took the handle (0: never)
     retake_s: float = 0.0  # ... and takes it again then (0: never)
+    away_m: float = 0.0  # the patient moves this far away from the probe (WorldSetup; 0: never)
+    away_s: float = 0.0  # ... this long after the hand took the handle
+    away_time_s: float = 0.3  # ... within this long
     controller: ControllerParams | None = None
     estimator: EstimatorParams | None = None
     seed: int = 1
@@ -182,6 +185,9 @@ def rehearse(
         seed=setup.seed,
         faults=setup.faults,
         probe_check_s=_probe_check_s(setup.estimator),
+        away_m=setup.away_m,
+        away_s=setup.away_s,
+        away_time_s=setup.away_time_s,
     )
     announce("starting the rehearsal world")
     with RehearsalWorld(world_setup) as world:

@@ -136,6 +136,11 @@ class WorldSetup:
     # the runner's probe check after its rebias: the hand pushes the probe's tip a few times for
     # this long first, and takes the handle as it ends (0: no check)
     probe_check_s: float = 0.0
+    # the patient moves away from the probe (plant_models.breathing: away_m over away_time_s)
+    # away_s after the hand took the handle (away_m 0: never)
+    away_m: float = 0.0
+    away_s: float = 0.0
+    away_time_s: float = 0.3
     ft_host: str = "127.0.0.1"  # where the FT-150 stream listens
     ft_port: int = 0  # 0: any free port (the URCap's daemon uses 63351)
 
@@ -224,10 +229,15 @@ class _World:
         )
         self.breathing = (
             Breathing(
-                BreathingParams(amplitude_m=setup.breathing_m),
+                BreathingParams(
+                    amplitude_m=setup.breathing_m,
+                    away_s=start + setup.away_s,
+                    away_m=setup.away_m,
+                    away_time_s=setup.away_time_s,
+                ),
                 rng=np.random.default_rng([setup.seed, 1]),
             )
-            if setup.breathing_m > 0.0
+            if setup.breathing_m > 0.0 or setup.away_m > 0.0
             else None
         )
         self._surface = {"surface_offset_m": np.zeros(1), "surface_rate_m_s": np.zeros(1)}
@@ -459,6 +469,9 @@ class _World:
             else:
                 start = t + TASK_LEAD_S
             changes["start_s"] = start
+            if self.breathing is not None:  # the patient's move on the task's clock
+                breath = self.breathing.params
+                self.breathing.retune(dataclasses.replace(breath, away_s=start + self.setup.away_s))
             if params.task == "push_release":
                 # it lets go release_s after the hand came (a scenario's task starts at 0 s), not
                 # at that time of the world's clock, which the rebias has already run past

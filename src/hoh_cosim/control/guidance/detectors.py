@@ -25,6 +25,8 @@ recovery starts. The detectors adapt the features' own blocks, which the stages 
 
 from __future__ import annotations
 
+import math
+from collections import deque
 from collections.abc import Sequence
 from typing import Protocol
 
@@ -112,8 +114,8 @@ class SupervisorWatch(_Quiet):
 
 
 class ReleaseWatch:
-    """The release detector (`hoh_cosim.control.release`): while guiding (if on) whether the hand
-    let go; while braking whether it pushes again."""
+    """The release detector (`hoh_cosim.control.release`): while guiding (if on; in contact only
+    with its `in_contact`) whether the hand let go; while braking whether it pushes again."""
 
     modes = frozenset({Mode.FREE, Mode.CONTACT, Mode.BRAKING})
 
@@ -122,6 +124,8 @@ class ReleaseWatch:
 
     def event(self, mode: Mode, tick: Tick) -> Event | None:
         if mode != Mode.BRAKING and not self.enabled:
+            return None
+        if mode == Mode.CONTACT and not self.detector.params.in_contact:
             return None
         braking = self.detector.step(
             tick.t, tick.F, tick.F_raw, self.deadband, bool(tick.request.any()), tick.probe
@@ -154,15 +158,19 @@ class HoldWatch:
     ) -> None:
         self.hold, self.deadband, self.enabled = hold, deadband, enabled
         self.threshold_sq = contact_threshold_N * contact_threshold_N
-        self._released_in_contact = False
+        self.reset()
 
     def event(self, mode: Mode, tick: Tick) -> Event | None:
         axis = tick.axis
         if not self.enabled or axis is None:
             return None
-        in_contact = mode == Mode.BRAKING and self._released_in_contact
-        asking = bool(tick.request.any())
-        if self.hold.watch(tick.t, tick.F, self.deadband, axis, tick.F_probe, in_contact, asking):
+        if mode == Mode.BRAKING and not self._released_in_contact:
+            # a brake after a release in the air, or after a hold or a recovery that ended
+            # without the hand: rest until the hand pushes, never a hold of the robot's own
+            return None
+        in_contact = mode == Mode.BRAKING
+        moved = self._moved(tick, axis) if self.hold.params.engage_still_m > 0.0 else 0.0
+        if self.hold.watch(tick.t, tick.F, self.deadband, axis, tick.F_probe, in_contact, moved):
             return Event.HOLD_READY
         return None
 
@@ -187,8 +195,19 @@ class HoldWatch:
                 keep_level=previous == Mode.RECOVERING,
             )
 
+    def _moved(self, tick: Tick, axis: Vec3) -> float:
+        """How far the tip moved across the probe's axis over the last `engage_s` [m]."""
+        tips = self._tips
+        tips.append((tick.t, tick.p_BT.copy()))
+        while tick.t - tips[0][0] > self.hold.params.engage_s + 1e-9:
+            tips.popleft()
+        d = tips[-1][1] - tips[0][1]
+        across = d - float(d.dot(axis)) * axis
+        return math.sqrt(float(across.dot(across)))
+
     def reset(self) -> None:
         self._released_in_contact = False
+        self._tips: deque[tuple[float, Vec3]] = deque()
 
 
 class HoldGuard(_Quiet):
@@ -242,7 +261,7 @@ class RecoveryWatch:
             return None
         if not self.enabled:
             return Event.RECOVERY_FAILED
-        if recovery.pulled(tick.F):
+        if recovery.pulled(tick.t, tick.F):
             return Event.PUSHED
         if recovery.back(tick.t, tick.probe):
             return Event.RECOVERED if recovery.hands_off else Event.CONTACT_BACK
