@@ -1,7 +1,7 @@
 """Speed side by side: a reference commit against the working tree, interleaved in one run.
 
     python benchmarks/compare.py OLD_REF [--rounds 3] [--duration 10] [--cycles 30000]
-                                         [--scenarios circles,contact_scan]
+                                         [--scenarios circles,contact_scan] [--preset NAME]
                                          [--sweep studies/slopes.yaml] [--report quick|full]
                                          [--workers 2] [--runs]
 
@@ -15,7 +15,10 @@ whose `hoh_cosim` and `plant_models` are that tree's:
   (FMUs built beforehand, from each tree's own source); the engine's own wall time of the stepping
   loop (`Recording.wall_s`), so imports, building and results are not counted;
 - the controller cycle: `benchmarks/controller_cycle.py`'s `run` from each tree (`--cycles` cycles
-  of Estimator + HandGuidingController), its p50 and p99.
+  of Estimator + HandGuidingController), its p50 and p99; with `--preset`, the same cycle again
+  with the preset's values (those that differ from the defaults, read from the working tree's
+  preset and set on each tree's parameters; a field the old tree lacks stays at its default there,
+  and the result names it), `preset_p50_ratio` and `preset_p99_ratio` in the result.
 
 - whole studies, when asked: `hoh-cosim sweep SWEEP --workers W` and `hoh-cosim report
   [--quick] --workers W`, each as its own command from the tree (its own local Dask cluster),
@@ -62,6 +65,7 @@ PROBE = textwrap.dedent(
     from pathlib import Path
 
     root, duration, cycles, scenarios = Path(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+    import numpy as np
     import hoh_cosim, plant_models
     for module in (hoh_cosim, plant_models):
         assert Path(module.__file__).resolve().is_relative_to(root.resolve()), module.__file__
@@ -83,6 +87,34 @@ PROBE = textwrap.dedent(
     result = cycle.run(cycles, 5)
     figures["controller_p50_us"] = result["p50_us"]
     figures["controller_p99_us"] = result["p99_us"]
+    changes = json.loads(sys.argv[5])
+    if changes:
+        # the preset's values on this tree's parameters, where this tree has the field
+        import dataclasses
+
+        def changed(obj, path, value):
+            head, _, rest = path.partition(".")
+            if not dataclasses.is_dataclass(obj) or not hasattr(obj, head):
+                return obj, False
+            if not rest:
+                return dataclasses.replace(obj, **{head: value}), True
+            inner, done = changed(getattr(obj, head), rest, value)
+            return dataclasses.replace(obj, **{head: inner}), done
+
+        params = {
+            "estimator": cycle.EstimatorParams(ft_rebias_packets=0, probe_rebias_packets=0),
+            "controller": cycle.ControllerParams(),
+        }
+        missing = []
+        for key, value in changes.items():
+            block, _, path = key.partition(".")
+            params[block], done = changed(params[block], path, value)
+            if not done:
+                missing.append(key)
+        us = cycle.durations_us(cycles, 5, (params["estimator"], params["controller"]))
+        figures["preset_p50_us"] = float(np.percentile(us, 50))
+        figures["preset_p99_us"] = float(np.percentile(us, 99))
+        figures["preset_missing"] = missing
     print(json.dumps(figures))
     """
 )
@@ -216,6 +248,7 @@ def _probe(tree: Path, args: argparse.Namespace) -> dict:
         [
             *(sys.executable, "-c", PROBE, str(tree)),
             *(str(args.duration), str(args.cycles), args.scenarios),
+            json.dumps(_preset_changes(args.preset)),
         ],
         capture_output=True,
         text=True,
@@ -225,6 +258,21 @@ def _probe(tree: Path, args: argparse.Namespace) -> dict:
     if done.returncode != 0:
         raise SystemExit(f"compare: the probe failed in {tree}:\n{done.stderr[-3000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _preset_changes(name: str | None) -> dict[str, object]:
+    """The working tree's preset `name` as the values that differ from the defaults (dotted keys,
+    JSON values): the same changes for both trees; {} without a preset."""
+    if not name:
+        return {}
+    from hoh_cosim.presets import BLOCKS, changed_from, load_preset
+
+    preset = load_preset(name)
+    changes = {}
+    for block, cls in BLOCKS.items():
+        for key, value in changed_from(cls(), preset.params[block]).items():
+            changes[f"{block}.{key}"] = list(value) if isinstance(value, tuple) else value
+    return changes
 
 
 def _environment(tree: Path) -> dict[str, str]:
@@ -270,6 +318,10 @@ def _best(rounds: list[dict]) -> dict:
         "controller_p50_us": min(r["controller_p50_us"] for r in rounds),
         "controller_p99_us": min(r["controller_p99_us"] for r in rounds),
     }
+    if "preset_p99_us" in rounds[0]:
+        best["preset_p50_us"] = min(r["preset_p50_us"] for r in rounds)
+        best["preset_p99_us"] = min(r["preset_p99_us"] for r in rounds)
+        best["preset_missing"] = rounds[0]["preset_missing"]
     for key in rounds[0]["studies_s"]:
         best[f"{key}_s"] = min(r["studies_s"][key] for r in rounds)
     if "runs" in rounds[0]:
@@ -291,6 +343,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=10.0, help="simulated s per scenario")
     parser.add_argument("--cycles", type=int, default=30_000, help="controller cycles")
     parser.add_argument("--scenarios", default="circles,contact_scan")
+    parser.add_argument(
+        "--preset",
+        help="also time the controller cycle with this preset's values (each tree, where it has "
+        "the field)",
+    )
     parser.add_argument("--sweep", help="also time `hoh-cosim sweep` of this file (in the tree)")
     parser.add_argument(
         "--report", choices=("quick", "full"), help="also time `hoh-cosim report [--quick]`"
@@ -337,7 +394,13 @@ def main(argv: list[str] | None = None) -> int:
                     print(
                         f"round {round_ + 1} {label}: {steps}; controller p50 "
                         f"{figures['controller_p50_us']:.1f} / p99 {figures['controller_p99_us']:.1f} µs"
-                        f"{studies}",
+                        + (
+                            f"; with {args.preset} p50 {figures['preset_p50_us']:.1f} / p99 "
+                            f"{figures['preset_p99_us']:.1f} µs"
+                            if args.preset
+                            else ""
+                        )
+                        + studies,
                         flush=True,
                     )
         finally:
@@ -356,6 +419,9 @@ def main(argv: list[str] | None = None) -> int:
     for figure in ("p50", "p99"):
         key = f"controller_{figure}_us"
         result[f"controller_{figure}_ratio"] = round(new_best[key] / old_best[key], 3)
+        if args.preset:
+            key = f"preset_{figure}_us"
+            result[f"preset_{figure}_ratio"] = round(new_best[key] / old_best[key], 3)
     for key in runs["old"][0]["studies_s"]:
         result[f"{key}_speedup"] = round(old_best[f"{key}_s"] / new_best[f"{key}_s"], 3)
     if args.runs:
@@ -372,6 +438,12 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"best of {args.rounds}: inprocess x{result['inprocess_speedup']}, fmu "
         f"x{result['fmu_speedup']}, controller p99 new/old {result['controller_p99_ratio']}"
+        + (
+            f", with {args.preset} {result['preset_p99_ratio']} (fields the old tree lacks, "
+            f"left at its defaults: {', '.join(old_best['preset_missing']) or 'none'})"
+            if args.preset
+            else ""
+        )
     )
     print(json.dumps(result))
     return 0

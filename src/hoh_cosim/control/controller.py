@@ -129,10 +129,11 @@ class ControllerParams:
     translation: AdmittanceGains = TRANSLATION_GAINS
     rotation: AdmittanceGains = ROTATION_GAINS
     contact_compensation: bool = True  # eq. 11–12
-    # [N] eq. 11-12 takes the probe force in full from this size on, none of it under half of it,
-    # in proportion between: what the housing's play leaves in the probe sensor's reading (up to
-    # 0.8 N per axis, seed 3.B.2; 0.5-0.7 N in the air after a probe check) then moves nothing in
-    # the air, where in full it made the robot creep at a few mm/s (0: in full, the seed's)
+    # [N] in the air (the mode FREE), eq. 11-12 takes the probe force in full from this size on,
+    # none of it under half of it, in proportion between, and in full once in contact: what the
+    # housing's play leaves in the probe sensor's reading (up to 0.8 N per axis, seed 3.B.2;
+    # 0.5-0.7 N in the air after a probe check) then moves nothing in the air, where in full it
+    # made the robot creep at a few mm/s (0: in full always, the seed's)
     compensation_onset_N: float = 0.0
     # ... and the contact's moment out of the torque (the estimator's tau_probe_B)
     contact_torque: bool = True
@@ -341,7 +342,7 @@ class HandGuidingController:
         )
         self._latched |= status & _LATCHED
         tick, command = self._tick, self._command
-        tick.start(t, dt, status, self._last, inputs, self._reading)
+        tick.start(t, dt, status, self._last, inputs, self._reading, self.mode in _AIR)
         command.start(status)
         if not status:  # the hand's request: every mode reads it
             for stage in self._request:
@@ -365,6 +366,7 @@ class HandGuidingController:
 
 
 _NO_BRAKE = frozen([0.0])
+_AIR = frozenset({Mode.STOPPED, Mode.FREE})  # the probe off the patient (the last tick's mode)
 _MODE_PORT = {mode: frozen([float(mode)]) for mode in Mode}
 
 

@@ -172,6 +172,7 @@ class HoldParams:
         "confirm_s": "s",
         "touch_tau_s": "s",
         "blend_s": "s",
+        "engage_blend_s": "s",
         "swing_s": "s",
         "normal_max_deg": "deg",
         "normal_tau_s": "s",
@@ -243,6 +244,9 @@ class HoldParams:
     # patient moved away reads as F̃ along the probe for as long; False: across only)
     swing_along: bool = False
     blend_s: float = 0.2  # [s] the hand-back's blend
+    # [s] the engagement's blend: the command before the hold, kept, gives way to the hold's over
+    # this long while its surface filter settles (0: the hold's at once)
+    engage_blend_s: float = 0.0
     # [N] the retake's band along the probe (module docstring); 0: no retake. The clinical study's
     # hold, after a probe check, sets 1 N: F̃·a with nobody's hand read -0.6 to +0.6 N there
     retake_band_N: float = 0.0
@@ -282,6 +286,7 @@ class HoldParams:
             "settle_s",
             "confirm_s",
             "blend_s",
+            "engage_blend_s",
             "swing_s",
             "retake_band_N",
             "loss_s",
@@ -484,6 +489,8 @@ class ContactHold:
         self._listening = False  # the retake listens this tick (the tick began holding)
         self._touched_at: float | None = None  # the tick of a touch, on that tick
         self._n = 0.0  # the touch's size this tick (`_touch`), for the line's following
+        self._t_engaged = -math.inf  # when the hold began, and the command before it
+        self._v_before = np.zeros(3)
 
     @property
     def active(self) -> bool:
@@ -657,6 +664,7 @@ class ContactHold:
         self.phase = HoldPhase.HOLDING
         self.ended = HoldEnd.NONE
         self.holds += 1
+        self._t_engaged, self._v_before = t, v_prev.copy()
 
     def stop(self) -> None:
         """The controller commanded zero (a stop flag): a hold in progress ends (STOPPED), and
@@ -914,4 +922,8 @@ class ContactHold:
             return (1.0 - beta) * v_hold + beta * v_law
         if p.motion == "normal" and F_meas_B is not None:
             self._follow_normal(dt, self._n, F, F_meas_B, p_BT_B)
+        if p.engage_blend_s > 0.0 and t - self._t_engaged < p.engage_blend_s:
+            # v = (1 - γ) v_before + γ v_hold, γ from 0 to 1 since the engagement
+            gamma = (t - self._t_engaged) / p.engage_blend_s
+            return (1.0 - gamma) * self._v_before + gamma * v_hold
         return v_hold

@@ -123,3 +123,22 @@ def test_reset_ends_the_hold_and_a_new_engagement_starts_afresh():
 
 def test_it_reads_only_the_tick_and_the_command():
     assert_reads_only(hold_module, engaged(), contact_tick(DT), make_command())
+
+
+def test_the_engagements_blend_goes_from_the_command_before_to_the_holds():
+    params = HoldParams(enabled=True, engage_blend_s=0.1)
+    stage, twin = HoldStage(params), HoldStage(HoldParams(enabled=True))
+    v_before = np.array([0.0, 0.0, -0.004])  # the guiding's last command, into the patient
+    for s in (stage, twin):
+        tick = contact_tick(0.0)
+        s.hold.engage(0.0, tick.F, tick.F_meas, tick.F_probe, AXIS, tick.p_BT, v_before)
+    gaps = []
+    for i in range(1, 80):  # 0.16 s: through the blend and past it
+        force, z = breath(i)
+        blended = stage.step(contact_tick(i * DT, force, z), make_command()).v
+        held = twin.step(contact_tick(i * DT, force, z), make_command()).v
+        gamma = min(i * DT / params.engage_blend_s, 1.0)
+        np.testing.assert_allclose(blended, (1 - gamma) * v_before + gamma * held, atol=1e-15)
+        gaps.append(float(np.linalg.norm(blended - held)))
+    assert gaps[0] > 1e-4  # at first mostly the command before: it differs from the hold's
+    assert gaps[-1] == 0.0  # the blend is over: the hold's own command

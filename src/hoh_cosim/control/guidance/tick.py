@@ -23,8 +23,8 @@ class Tick:
     On a tick with a stop flag only the time, the flags and the last command are read.
 
     F, tau        F̃ and τ̃: the estimated hand force and torque, in B, with the contact's force
-                  and moment taken out (eq. 11-12) where contact compensation is on (beyond the
-                  play, with an onset)
+                  and moment taken out (eq. 11-12) where contact compensation is on (in the
+                  air, beyond the play only, with an onset)
     F_raw         the newest unfiltered wrist packet, compensated the same way (None: not wired,
                   or nothing reads it)
     F_meas        ... as it came (hand and contact), or None
@@ -70,11 +70,13 @@ class Tick:
         last: tuple[Vec3, Vec3],
         inputs: Mapping[str, Vec],
         reading: tuple[bool, bool, bool, bool, float],
+        air: bool = True,
     ) -> None:
         """A new tick (one object serves every tick of a controller). Its forces only without a
         stop flag (a stop's inputs may be non-finite); `reading`: contact compensation, the
         contact's torque, a probe sensor, the compensated raw packet (which only the release
-        detector and the hold read), and the compensation's onset (`ControllerParams`)."""
+        detector and the hold read), and the compensation's onset in the air
+        (`ControllerParams`); `air`: the probe was off the patient on the last tick."""
         self.t, self.dt, self.status = t, dt, status
         self.v_last, self.w_last = last
         self.request = _ZERO6
@@ -88,7 +90,7 @@ class Tick:
         if compensated:
             tau_probe = inputs.get("tau_probe_B")
             F_c = F_probe
-            if onset > 0.0:  # the probe force's part: none under onset / 2, all from onset on
+            if onset > 0.0 and air:  # in the air: none under onset / 2, all from onset on
                 w = min(max(2.0 * math.sqrt(float(F_probe.dot(F_probe))) / onset - 1.0, 0.0), 1.0)
                 F_c = w * F_probe
                 tau_probe = None if tau_probe is None else w * tau_probe
