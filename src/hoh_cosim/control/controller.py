@@ -129,8 +129,9 @@ class ControllerParams:
     translation: AdmittanceGains = TRANSLATION_GAINS
     rotation: AdmittanceGains = ROTATION_GAINS
     contact_compensation: bool = True  # eq. 11–12
-    # [N] in the air (the mode FREE), eq. 11-12 takes the probe force in full from this size on,
-    # none of it under half of it, in proportion between, and in full once in contact: what the
+    # [N] in the air (guiding there, or braking with the probe force under lift_off_N), eq. 11-12
+    # takes the probe force in full from this size on, none of it under half of it, in proportion
+    # between, and in full once in contact: what the
     # housing's play leaves in the probe sensor's reading (up to 0.8 N per axis, seed 3.B.2;
     # 0.5-0.7 N in the air after a probe check) then moves nothing in the air, where in full it
     # made the robot creep at a few mm/s (0: in full always, the seed's)
@@ -331,6 +332,16 @@ class HandGuidingController:
         """The flags of the last step."""
         return Status(self._bits)
 
+    def _in_air(self, inputs: Mapping[str, Vec]) -> bool:
+        """The probe off the patient, as the last tick left it: guiding in the air (or stopped),
+        or braking with the probe force under `lift_off_N` (a release in the air)."""
+        if self.mode in _AIR:
+            return True
+        if self.mode != Mode.BRAKING:
+            return False
+        F = inputs["F_probe_B"]
+        return bool(float(F.dot(F)) < self.params.lift_off_N * self.params.lift_off_N)
+
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         p = self.params
         status = self._latched | check_inputs(
@@ -342,7 +353,7 @@ class HandGuidingController:
         )
         self._latched |= status & _LATCHED
         tick, command = self._tick, self._command
-        tick.start(t, dt, status, self._last, inputs, self._reading, self.mode in _AIR)
+        tick.start(t, dt, status, self._last, inputs, self._reading, self._in_air(inputs))
         command.start(status)
         if not status:  # the hand's request: every mode reads it
             for stage in self._request:
