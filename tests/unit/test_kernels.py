@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from hoh_cosim.control import kernels
-from hoh_cosim.control.admittance import TRANSLATION_GAINS, AdmittanceGains
+from hoh_cosim.control.admittance import TRANSLATION_GAINS, AdmittanceGains, deadband_linear
 from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
 from hoh_cosim.control.frames import rotvec_to_matrix
@@ -579,3 +579,30 @@ def test_a_wrong_law_kernel_would_be_caught():
             compiled.step(k * 8e-3, 8e-3, inputs)["twist_B"],
         )
     assert agree.worst()[1] > 100 * REL
+
+
+def test_eq_10_on_force_and_torque_at_once_is_the_pure_law_to_the_bit(rng):
+    """`deadband_law6` against `admittance.deadband_linear` on [F; τ]: inside and at the deadband,
+    zeros of both signs, negative and positive pushes; the same bits, signs of zero included."""
+    slope = np.concatenate([TRANSLATION_GAINS.slope, [0.4, 0.4, 0.4]])
+    eta = np.concatenate([TRANSLATION_GAINS.deadband, [0.1, 0.1, 0.1]])
+    for k in range(2000):
+        F, tau = rng.normal(scale=2.0, size=3), rng.normal(scale=0.2, size=3)
+        F[k % 3] = (0.0, -0.0, eta[k % 3], -eta[k % 3])[k % 4]
+        got = kernels.deadband_law6(F, tau, slope, eta)
+        pure = deadband_linear(np.concatenate([F, tau]), slope, eta)
+        np.testing.assert_array_equal(got, pure)
+        np.testing.assert_array_equal(np.signbit(got), np.signbit(pure))
+
+
+def test_the_controllers_law_takes_the_compiled_eq_10_and_gives_the_pure_twist():
+    pure, compiled = _pure_and_compiled(HandGuidingController)
+    assert compiled._request[0]._compiled
+    assert not pure._request[0]._compiled
+    rng = np.random.default_rng(5)
+    for k in range(300):
+        inputs = _guiding(k, 8e-3, rng)
+        np.testing.assert_array_equal(
+            pure.step(k * 8e-3, 8e-3, inputs)["twist_B"],
+            compiled.step(k * 8e-3, 8e-3, inputs)["twist_B"],
+        )

@@ -276,7 +276,20 @@ class HandGuidingController:
         self._pipelines, self._rests = _pipelines(self, p)
         compensated = p.use_probe and p.contact_compensation
         raw = p.release.enabled or p.hold.enabled  # the detectors that read the raw packet
-        self._reading = (compensated, p.contact_torque, p.use_probe, raw, p.compensation_onset_N)
+        # what reads the probe's packet, axis and the sensors' ages (a hold or a recovery in
+        # progress finishes after a retune that turned it off)
+        features = (p.hold.enabled, p.follow.enabled, p.glide.enabled, p.recovery.enabled)
+        extra = p.use_probe and (any(features) or getattr(self, "mode", Mode.STOPPED) in _FEATURED)
+        lift_sq = p.lift_off_N * p.lift_off_N
+        self._reading = (
+            compensated,
+            p.contact_torque,
+            p.use_probe,
+            raw,
+            p.compensation_onset_N,
+            extra,
+            lift_sq,
+        )
         self._brake_accel = frozen([p.limits.max_brake_accel])
 
     def reset(self) -> None:
@@ -332,16 +345,6 @@ class HandGuidingController:
         """The flags of the last step."""
         return Status(self._bits)
 
-    def _in_air(self, inputs: Mapping[str, Vec]) -> bool:
-        """The probe off the patient, as the last tick left it: guiding in the air (or stopped),
-        or braking with the probe force under `lift_off_N` (a release in the air)."""
-        if self.mode in _AIR:
-            return True
-        if self.mode != Mode.BRAKING:
-            return False
-        F = inputs["F_probe_B"]
-        return bool(float(F.dot(F)) < self.params.lift_off_N * self.params.lift_off_N)
-
     def step(self, t: float, dt: float, inputs: Mapping[str, Vec]) -> dict[str, Vec]:
         p = self.params
         status = self._latched | check_inputs(
@@ -353,7 +356,7 @@ class HandGuidingController:
         )
         self._latched |= status & _LATCHED
         tick, command = self._tick, self._command
-        tick.start(t, dt, status, self._last, inputs, self._reading, self._in_air(inputs))
+        tick.start(t, dt, status, self._last, inputs, self._reading, _AIR[self.mode])
         command.start(status)
         if not status:  # the hand's request: every mode reads it
             for stage in self._request:
@@ -377,7 +380,10 @@ class HandGuidingController:
 
 
 _NO_BRAKE = frozen([0.0])
-_AIR = frozenset({Mode.STOPPED, Mode.FREE})  # the probe off the patient (the last tick's mode)
+# the probe off the patient after the last tick's mode: guiding in the air (or stopped); braking,
+# if the probe force is under lift_off_N (a release in the air: `Tick.start`); else in contact
+_AIR = {mode: None if mode == Mode.BRAKING else mode in (Mode.STOPPED, Mode.FREE) for mode in Mode}
+_FEATURED = HOLD_MODES | {Mode.RECOVERING}
 _MODE_PORT = {mode: frozen([float(mode)]) for mode in Mode}
 
 

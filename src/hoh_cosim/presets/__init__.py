@@ -257,7 +257,7 @@ def figure_lines(figures: Mapping[str, Any] | None) -> list[str]:
         )
     hold, losses = figures.get("hold_contact_force_std_N_max"), figures.get("hold_contact_losses")
     if hold is not None:
-        lines.append(f"hands-off contact force std at most {hold:.2f} N, {losses} losses")
+        lines.append(f"hands-off contact force std at most {hold:.2f} N, {losses or 0:.0f} losses")
     back, peak = figures.get("recovery_time_s_max"), figures.get("recovery_peak_N_max")
     never = figures.get("recovery_never_back") or 0
     if never:

@@ -1240,8 +1240,13 @@ def _sections(
                 f"{_f(t['recovery_time_s_largest'], '.2f')} s"
                 + (f", {t['recovery_never_back']} never back" if t["recovery_never_back"] else "")
                 + f", {_f(t['recovery_peak_N_largest'], '.1f')} N ({met(t['recovery_met'])})",
-                f"{_f(rel['drift_m'], '.2f', 1e3)} mm, {_f(rel['settle_s'], '.0f', 1e3)} ms "
-                f"({'met' if t['release_met'] else 'not met'})",
+                f"{_f(rel['drift_m'], '.2f', 1e3)} mm, "
+                + (
+                    "never settled"
+                    if rel["settle_s"] is None and rel["drift_m"] is not None
+                    else f"{_f(rel['settle_s'], '.0f', 1e3)} ms"
+                )
+                + f" ({'met' if t['release_met'] else 'not met'})",
             ]
         )
     targets.tables.append(

@@ -17,7 +17,7 @@ from hoh_cosim.control.guidance.stages.law import AdmittanceLaw
 from hoh_cosim.control.supervisor import Status
 from tests.unit.stages.ticks import assert_reads_only, make_command, make_tick
 
-COMPENSATED = (True, True, True, False, 0.0)
+COMPENSATED = (True, True, True, False, 0.0, True, 2.25)
 
 
 def gains(law: str, rotation: bool = False) -> AdmittanceGains:

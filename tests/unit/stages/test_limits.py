@@ -13,7 +13,7 @@ from tests.unit.stages.ticks import DT, PLAIN, assert_reads_only, make_command, 
 
 PARAMS = LimitParams()
 BOX = (PARAMS.workspace_min_B.tolist(), PARAMS.workspace_max_B.tolist())
-NO_PROBE = (False, False, False, False, 0.0)
+NO_PROBE = (False, False, False, False, 0.0, False, 2.25)
 X = np.array([1.0, 0.0, 0.0])
 FIXTURE = int(Status.FIXTURE)
 

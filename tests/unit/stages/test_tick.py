@@ -11,7 +11,7 @@ from hoh_cosim.control.guidance.tick import Tick
 from tests.estimates import controller_inputs
 
 ONSET = 2.0  # [N]
-READING = (True, False, True, False, ONSET)  # compensation on, with the onset
+READING = (True, False, True, False, ONSET, False, 2.25)  # compensation on, with the onset
 HAND = np.array([0.4, -0.2, 1.5])
 
 

@@ -15,8 +15,9 @@ from tests.estimates import controller_inputs
 
 DT = 0.002  # [s] the controller's tick
 
-# contact compensation, the contact's torque, a probe sensor, the raw packet, the onset
-PLAIN = (False, False, True, False, 0.0)
+# contact compensation, the contact's torque, a probe sensor, the raw packet, the onset, the
+# probe's packet, axis and ages read, the lift-off's size squared
+PLAIN = (False, False, True, False, 0.0, True, 2.25)
 
 
 def make_tick(
@@ -24,7 +25,7 @@ def make_tick(
     *,
     dt: float = DT,
     last: tuple[Vec3, Vec3] = (ZERO3, ZERO3),
-    reading: tuple[bool, bool, bool, bool, float] = PLAIN,
+    reading: tuple[bool, bool, bool, bool, float, bool, float] = PLAIN,
     **inputs: object,
 ) -> Tick:
     """A tick without a stop flag from `controller_inputs(**inputs)`."""

@@ -71,20 +71,35 @@ class ModeMachine:
 
     def __init__(self, detectors: Sequence[Detector]) -> None:
         self.detectors = tuple(detectors)
+        # per mode, the detectors that watch it, with their places in the order
+        self._watching = {
+            mode: tuple((i, d) for i, d in enumerate(self.detectors) if mode in d.modes)
+            for mode in Mode
+        }
 
     def advance(self, mode: Mode, tick: Tick) -> Mode:
-        """The mode at the end of this tick, from `mode` at its start."""
-        for detector in self.detectors:
-            if mode not in detector.modes:
+        """The mode at the end of this tick, from `mode` at its start: the detectors in their
+        order, each from the mode the ones before it left."""
+        for i, detector in self._watching[mode]:
+            event = detector.event(mode, tick)
+            if event is not None:
+                new = next_mode(mode, event)
+                if new != mode:
+                    return self._moved(new, mode, i + 1, tick)
+        return mode
+
+    def _moved(self, mode: Mode, before: Mode, start: int, tick: Tick) -> Mode:
+        """A transition to `mode`: the detectors' hooks, then the rest of the order from it."""
+        for each in self.detectors:
+            each.enter(mode, before, tick)
+        for i, detector in self._watching[mode]:
+            if i < start:
                 continue
             event = detector.event(mode, tick)
-            if event is None:
-                continue
-            new = next_mode(mode, event)
-            if new != mode:
-                for each in self.detectors:
-                    each.enter(new, mode, tick)
-                mode = new
+            if event is not None:
+                new = next_mode(mode, event)
+                if new != mode:
+                    return self._moved(new, mode, i + 1, tick)
         return mode
 
     def reset(self) -> None:
@@ -296,8 +311,7 @@ class ContactWatch:
         self.reset()
 
     def event(self, mode: Mode, tick: Tick) -> Event | None:
-        F = tick.probe
-        size_sq = 0.0 if F is None else float(F.dot(F))
+        size_sq = tick.probe_sq
         if mode == Mode.FREE:
             return Event.TOUCH_DOWN if size_sq > self.touch_sq else None
         if size_sq >= self.lift_sq:

@@ -34,6 +34,9 @@ class Tick:
     axis          the probe's axis in B (handle to tip), or None
     p_BT          the measured tip position in B
     ft_age, probe_age   [s] since each sensor's newest packet
+    probe_sq      |F_probe|² [N²] (0 without a probe sensor)
+    (F_probe_meas, axis and the ages are read only where a stage or a detector reads them: None,
+    None and 0 otherwise)
     status        the supervisor's stop flags of this tick (`hoh_cosim.control.supervisor`)
     v_last, w_last      the twist the controller commanded on its last tick
     request       the hand's request: the law's twist [v; ω] (set once the law has run)
@@ -51,6 +54,7 @@ class Tick:
         "p_BT",
         "probe",
         "probe_age",
+        "probe_sq",
         "request",
         "status",
         "t",
@@ -60,7 +64,7 @@ class Tick:
     )
 
     def __init__(self) -> None:
-        self.start(0.0, 0.0, 1, (ZERO3, ZERO3), {}, (False, False, False, False, 0.0))
+        self.start(0.0, 0.0, 1, (ZERO3, ZERO3), {}, (False, False, False, False, 0.0, False, 0.0))
 
     def start(
         self,
@@ -69,29 +73,34 @@ class Tick:
         status: int,
         last: tuple[Vec3, Vec3],
         inputs: Mapping[str, Vec],
-        reading: tuple[bool, bool, bool, bool, float],
-        air: bool = True,
+        reading: tuple[bool, bool, bool, bool, float, bool, float],
+        air: bool | None = True,
     ) -> None:
         """A new tick (one object serves every tick of a controller). Its forces only without a
         stop flag (a stop's inputs may be non-finite); `reading`: contact compensation, the
         contact's torque, a probe sensor, the compensated raw packet (which only the release
-        detector and the hold read), and the compensation's onset in the air
-        (`ControllerParams`); `air`: the probe was off the patient on the last tick."""
+        detector and the hold read), the compensation's onset in the air (`ControllerParams`),
+        whether anything reads the probe's packet, axis and the ages, and the lift-off's size
+        squared; `air`: the probe was off the patient on the last tick, or None (braking): off it
+        if the probe force is under the lift-off."""
         self.t, self.dt, self.status = t, dt, status
         self.v_last, self.w_last = last
         self.request = _ZERO6
         if status:
             return
-        compensated, contact_torque, use_probe, raw, onset = reading
+        compensated, contact_torque, use_probe, raw, onset, extra, lift_sq = reading
         F_probe = inputs["F_probe_B"]
         F, tau = inputs["F_hand_B"], inputs["tau_hand_B"]
-        F_meas = inputs.get("F_hand_meas_B")
+        F_meas = inputs.get("F_hand_meas_B") if raw or extra else None
         F_raw = F_meas if raw else None
+        self.probe_sq = probe_sq = float(F_probe.dot(F_probe)) if use_probe else 0.0
         if compensated:
             tau_probe = inputs.get("tau_probe_B")
             F_c = F_probe
+            if air is None:
+                air = probe_sq < lift_sq
             if onset > 0.0 and air:  # in the air: none under onset / 2, all from onset on
-                w = min(max(2.0 * math.sqrt(float(F_probe.dot(F_probe))) / onset - 1.0, 0.0), 1.0)
+                w = min(max(2.0 * math.sqrt(probe_sq) / onset - 1.0, 0.0), 1.0)
                 F_c = w * F_probe
                 tau_probe = None if tau_probe is None else w * tau_probe
             F = contact_compensated(F, F_c)
@@ -103,11 +112,15 @@ class Tick:
         self.F, self.tau, self.F_raw, self.F_meas = F, tau, F_raw, F_meas
         self.F_probe = F_probe
         self.probe = F_probe if use_probe else None
-        self.F_probe_meas = inputs.get("F_probe_meas_B")
-        self.axis = inputs.get("probe_axis_B")
         self.p_BT = inputs["p_BT_B"]
-        self.ft_age = float(inputs["ft_age"][0])
-        self.probe_age = float(inputs["probe_age"][0])
+        if extra:
+            self.F_probe_meas = inputs.get("F_probe_meas_B")
+            self.axis = inputs.get("probe_axis_B")
+            self.ft_age = float(inputs["ft_age"][0])
+            self.probe_age = float(inputs["probe_age"][0])
+        else:
+            self.F_probe_meas = self.axis = None
+            self.ft_age = self.probe_age = 0.0
 
 
 _ZERO6 = frozen(np.zeros(6))

@@ -10,6 +10,7 @@ import numpy as np
 
 from hoh_cosim.control.admittance import AdmittanceGains, apply_law
 from hoh_cosim.control.guidance.tick import Command, Tick
+from hoh_cosim.control.kernels import deadband_law6, kernels_enabled, warm_up_laws
 from hoh_cosim.control.vectors import frozen
 
 __all__ = ["AdmittanceLaw"]
@@ -23,12 +24,21 @@ class AdmittanceLaw:
         self._law6: AdmittanceGains | None = None
         if translation.law == rotation.law and translation.law not in ("isotropic", "variable"):
             self._law6 = _stacked(translation, rotation)  # half the work
+        # eq. 10 on both at once, compiled (`hoh_cosim.control.kernels`; the same bits)
+        self._compiled = self._law6 is not None and self._law6.law == "deadband_linear"
+        self._compiled = self._compiled and kernels_enabled()
+        if self._compiled:
+            warm_up_laws()
 
     def reset(self) -> None:
         """No state."""
 
     def step(self, tick: Tick, command: Command) -> Command:
-        if self._law6 is not None:
+        if self._compiled:
+            gains = self._law6
+            law = deadband_law6(tick.F, tick.tau, gains.slope, gains.deadband)
+            command.v, command.w = law[:3], law[3:]
+        elif self._law6 is not None:
             law = apply_law(np.concatenate([tick.F, tick.tau]), self._law6)
             command.v, command.w = law[:3], law[3:]
         else:
