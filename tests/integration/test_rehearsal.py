@@ -152,7 +152,16 @@ def test_a_clean_session_guides_the_robot_and_logs_every_cycle(tmp_path):
     assert np.ptp(p[:, 0]) > 0.01
     assert len(outcome.log.messages["/command"]) == result.cycles
     events = [m["event"] for m in outcome.log.messages["/events"]]
-    assert events == ["rebias", "parameters", "mode", "end"]  # the mode: guiding once rebiased
+    assert events[:3] == ["rebias", "parameters", "mode"]  # the mode: guiding once rebiased
+    assert events[-1] == "end"
+    # on a busy machine a stream's sample may come late: its stale flag stops the controller for
+    # those cycles (a mode change into and out of stopped) and the runner logs the starved time
+    # it did not count; nothing else happens in a clean session
+    between = outcome.log.messages["/events"][3:-1]
+    assert {m["event"] for m in between} <= {"mode", "starved"}, events
+    for m in between:
+        if m["event"] == "mode":
+            assert re.match(r"(free|contact) -> stopped|stopped -> free", m["detail"]), m
     assert not outcome.after.program_running  # stopped at the end too
     assert outcome.probe.parser.framing == "seed18"
 

@@ -293,6 +293,17 @@ def test_an_unknown_preset_on_the_command_line_runs_nothing(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_an_unknown_preset_in_a_scenario_file_names_the_file(tmp_path, capsys):
+    scenario = tmp_path / "mine.yaml"
+    scenario.write_text(f"extends: {SCENARIOS / 'release.yaml'}\npreset: turbo\n")
+    out = tmp_path / "run"
+    assert main([str(scenario), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"hoh-cosim: {scenario}: preset 'turbo': unknown (presets: seed, ")
+    assert "\n" not in err
+    assert not out.exists()
+
+
 # --- the command ----------------------------------------------------------------------------------
 
 
@@ -348,8 +359,10 @@ def test_a_rig_file_takes_a_preset_under_its_sections_and_the_option_over_it(tmp
 def test_a_rig_files_bad_preset_is_one_line(tmp_path):
     with pytest.raises(ConfigError, match=r"rig.yaml: preset: expected a preset's name"):
         load_config(rig(tmp_path, "preset: [clinical]\n"))
-    with pytest.raises(ConfigError, match=r"preset 'turbo': unknown"):
+    with pytest.raises(ConfigError, match=r"^/.*rig.yaml: preset 'turbo': unknown"):
         load_config(rig(tmp_path, "preset: turbo\n"))
+    with pytest.raises(ConfigError, match=r"^preset 'turbo': unknown"):  # the option's: no file
+        load_config(rig(tmp_path), preset="turbo")
 
 
 def test_the_blocks_defaults_are_untouched_by_the_presets():

@@ -410,7 +410,12 @@ def _preset(
             raise w.error("preset", f"expected a preset's name or a file's path, got {name!r}")
         if name.endswith((".yaml", ".yml")) or "/" in name:
             name = Path(w.file).parent / name
-    chosen = load_preset(name)
+    try:
+        chosen = load_preset(name)
+    except ConfigError as exc:
+        if preset is not None:  # the command line's: no file to name
+            raise
+        raise ConfigError(f"{w.file}: {exc}") from None
     kinds = [c.get("kind", n) if isinstance(c, Mapping) else n for n, c in components.items()]
     return chosen if any(isinstance(k, str) and k in BLOCKS for k in kinds) else None
 

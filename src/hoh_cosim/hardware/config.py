@@ -255,13 +255,19 @@ def load_config(
         timeout_s=w.number(rebias.get("timeout_s", 15.0), "rebias.timeout_s", positive=True),
     )
 
-    if preset is None:
+    from_file = preset is None
+    if from_file:
         preset = raw.get("preset", DEFAULT_PRESET)
         if not isinstance(preset, str) or not preset:
             raise w.error("preset", f"expected a preset's name or a file's path, got {preset!r}")
         if preset.endswith((".yaml", ".yml")) or "/" in preset:
             preset = here / preset
-    chosen = load_preset(preset)
+    try:
+        chosen = load_preset(preset)
+    except ConfigError as exc:
+        if not from_file:  # the command line's: no file to name
+            raise
+        raise ConfigError(f"{path}: {exc}") from None
     try:
         estimator = from_mapping(chosen.estimator, raw.get("estimator") or {}, "estimator")
         controller = from_mapping(chosen.controller, raw.get("controller") or {}, "controller")
