@@ -179,14 +179,10 @@ def faults_at(kind: str) -> tuple[Fault, ...]:
     ("fault", "cause"),
     [
         pytest.param("probe_unplug", re.escape("FSE103 on /dev/pts/"), id="probe_unplug"),
-        # the stream's age once the policy's 250 ms (stale_stop_s) are up, counted in the runner's
-        # 2 ms cycles: 250 ms, or 252 ms when the rounding leaves the 125th cycle just short
-        pytest.param(
-            "ft_stall",
-            r"FT-150 stream at \S+: no new sample for 25[02] ms "
-            r"\(the stream stalled: no byte read since its last sample\)",
-            id="ft_stall",
-        ),
+        # the device and the kind of failure; the age and the rest of the wording depend on how
+        # starved the machine was (250 or 252 ms on a quiet one, "... ms of it with this machine's
+        # ordinary tasks starved" on a loaded one)
+        pytest.param("ft_stall", r"FT-150 stream at \S+: no new sample for \d+ ms", id="ft_stall"),
         pytest.param(
             "ft_nan",
             re.escape("sent a non-finite value [nan, nan, nan, nan, nan, nan]"),
