@@ -1,5 +1,15 @@
 """FMU entry script: the operator block (`plant_models.operator.Operator`) through the generic adapter."""
 
+# First what the host must have (resources/requirements.txt): a host that lacks it gets one line
+# naming it and the pip install that fixes it, and the FMU fails to instantiate.
+try:
+    from hoh_cosim.fmi.host import require
+except ImportError:  # the project's code travels in the FMU's resources/: it is not there
+    _LINE = "HohOperator: resources/hoh_cosim is missing: rebuild the FMU with hoh-cosim export"
+    print(_LINE, file=__import__("sys").stderr)
+    raise ImportError(_LINE) from None
+require(__file__, "HohOperator")
+
 # pythonfmu's wrapper looks for the text "class X(Fmi2Slave):" in this file, so the adapter is
 # imported under that name; pin_namespace works around its release of this module's namespace.
 from hoh_cosim.fmi.slave import BlockSlave as Fmi2Slave

@@ -24,11 +24,14 @@ frame's origin (LOCAL_WORLD_ALIGNED, [v; ω]) has the columns [z_i × (p_f - o_i
 
 from __future__ import annotations
 
-import numpy as np
-from numba import njit, types
+from typing import Any
 
+import numpy as np
+
+from hoh_cosim.control.jit import njit, types
 from hoh_cosim.control.kernels import kernels_enabled
 from hoh_cosim.errors import ConfigError
+from plant_models.ur5 import chain_geometry
 
 __all__ = ["KINEMATICS_LAYOUT", "KernelUR5", "kernels_enabled"]
 
@@ -169,6 +172,24 @@ def _jacobian(G, frame, q, J):  # pragma: no cover - compiled
         J[3, i], J[4, i], J[5, i] = z[i, 0], z[i, 1], z[i, 2]
 
 
+def _pinocchio_geometry(model: Any) -> tuple[list[np.ndarray], dict[str, np.ndarray]]:
+    """A `UR5Model`'s joint placements and its frames in the last joint's frame, as 4x4
+    transforms (as `ur5.chain_geometry` gives them)."""
+    pin_model = model.model
+    joints = range(1, pin_model.njoints)
+    for j in joints:
+        if pin_model.joints[j].shortname() != "JointModelRZ" or pin_model.parents[j] != j - 1:
+            raise ConfigError("KernelUR5: expected a chain of revolute joints about z")
+    last = pin_model.njoints - 1
+    frames = {}
+    for name, fid in model.frame_ids.items():
+        frame = pin_model.frames[fid]
+        if frame.parentJoint != last:
+            raise ConfigError(f"KernelUR5: frame {name} is not fixed to the last link")
+        frames[name] = np.asarray(frame.placement.homogeneous)
+    return [np.asarray(pin_model.jointPlacements[j].homogeneous) for j in joints], frames
+
+
 class KernelUR5:
     """The kinematics a `UR5Model` gives the plant, compiled, from that model's own placements.
 
@@ -178,33 +199,26 @@ class KernelUR5:
 
     TOOL_FRAMES = ("tcp", "ft_sensor", "tool_com", "probe_sensor")
 
-    def __init__(self, model: object) -> None:
-        pin_model = model.model  # type: ignore[attr-defined]
-        self.frame_ids = dict(model.frame_ids)  # type: ignore[attr-defined]
-        joints = range(1, pin_model.njoints)
-        for j in joints:
-            if pin_model.joints[j].shortname() != "JointModelRZ" or pin_model.parents[j] != j - 1:
-                raise ConfigError("KernelUR5: expected a chain of revolute joints about z")
-        placements = [pin_model.jointPlacements[j] for j in joints]
-        last = pin_model.njoints - 1
-        frames = {}
-        for name, fid in self.frame_ids.items():
-            frame = pin_model.frames[fid]
-            if frame.parentJoint != last:
-                raise ConfigError(f"KernelUR5: frame {name} is not fixed to the last link")
-            frames[name] = frame.placement
+    def __init__(self, model: object | None = None, tool_frames: tuple[Any, ...] = ()) -> None:
+        """From a `UR5Model`'s placements (pinocchio's, the reference), or, with `model` None, from
+        `ur5.chain_geometry(tool_frames)` (no pinocchio needed: an FMU's host)."""
+        if model is not None:
+            joint_placements, frames = _pinocchio_geometry(model)
+        else:
+            joint_placements, frames = chain_geometry(tuple(tool_frames))
         # absent tool frames (a bare arm) read as the flange; then every other frame, by name
         tool = [frames.get(name, frames["flange"]) for name in self.TOOL_FRAMES]
-        self._rows = {name: len(placements) + 4 + i for i, name in enumerate(frames)}
+        self.frame_ids = {name: i for i, name in enumerate(frames)}
+        self._rows = {name: len(joint_placements) + 4 + i for i, name in enumerate(frames)}
         self._G = np.array(
             [
-                np.concatenate([np.asarray(M.rotation).ravel(), np.asarray(M.translation)])
-                for M in (*placements, *tool, *frames.values())
+                np.concatenate([T[:3, :3].ravel(), T[:3, 3]])
+                for T in (*joint_placements, *tool, *frames.values())
             ]
         )
-        self._nj = len(placements)
+        self._nj = len(joint_placements)
         self._G_tool = self._G[: self._nj + 4].copy()
-        self.nq = pin_model.nq
+        self.nq = self._nj
 
     def tool_kinematics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         return self.tool_kinematics_at(np.concatenate([q, qd, qdd]))

@@ -107,13 +107,21 @@ class Plant:
             FramePlacement(name, p_EX_E, R_EX)
             for name, (p_EX_E, R_EX) in p.tool.flange_frames().items()
         )
-        self.model = UR5Model(frames)
         # the kinematics compiled (plant_models.kernels), from the pinocchio model's placements;
-        # pinocchio stays the reference they are checked against
-        self._kernel = KernelUR5(self.model) if kernels_enabled() else None
-        if self._kernel is not None:
+        # pinocchio stays the reference they are checked against. Where it is not installed (an
+        # FMU's host), the kernels' own geometry of the same chain (`ur5.chain_geometry`), compiled
+        # where numba is installed, else plain Python
+        try:
+            self.model: UR5Model | None = UR5Model(frames)
+        except ImportError:
+            self.model = None
+        if self.model is None:
+            self._kernel: KernelUR5 | None = KernelUR5(None, frames)
+        else:
+            self._kernel = KernelUR5(self.model) if kernels_enabled() else None
+        if self._kernel is not None and kernels_enabled():
             self._kernel.warm_up()
-        self.arm = SpeedLArm(p.arm, self._kernel or self.model)
+        self.arm = SpeedLArm(p.arm, self._kernel or self.model)  # type: ignore[arg-type]
         self._loads = ToolLoads(p.tool, p.g_B)
         self._loads_constants = loads_constants(p.tool, p.g_B)
         self.reset()

@@ -30,6 +30,7 @@ __all__ = [
     "LINK_COM",
     "LINK_MASS",
     "UR5Model",
+    "chain_geometry",
     "dh_transform",
     "ur5_urdf",
 ]
@@ -139,6 +140,24 @@ class FramePlacement:
     name: str
     p_EX_E: np.ndarray
     R_EX: np.ndarray
+
+
+def chain_geometry(
+    tool_frames: tuple[FramePlacement, ...] = (),
+) -> tuple[list[np.ndarray], dict[str, np.ndarray]]:
+    """The chain `ur5_urdf` describes, without pinocchio: each joint's placement in its parent's
+    frame (a 4x4 transform: the previous joint's fixed DH part), and the `flange` and the tool's
+    frames in the last joint's frame (DH frame 6's fixed part, then each frame's placement in the
+    flange frame E). `plant_models.kernels.KernelUR5` runs on it where pinocchio is not installed;
+    the tests hold it to pinocchio's model of the URDF."""
+    joints = [np.eye(4)] + [_fixed_part(*dh) for dh in DH[:-1]]
+    flange = _fixed_part(*DH[-1])
+    frames = {"flange": flange}
+    for f in tool_frames:
+        E_X = np.eye(4)
+        E_X[:3, :3], E_X[:3, 3] = np.asarray(f.R_EX, float), np.asarray(f.p_EX_E, float)
+        frames[f.name] = flange @ E_X
+    return joints, frames
 
 
 class UR5Model:

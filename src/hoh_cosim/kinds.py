@@ -36,6 +36,12 @@ class ComponentKind:
     # the kind whose initial outputs (default parameters) give this one's input start values, port
     # by port where the names and sizes agree: an FMU run alone sees a physically valid world
     starts_from: str | None = None
+    # what its FMU's host must have installed (distributions; versions from the project's own
+    # requirements): numpy everywhere; scipy for the rotations (`control.frames`: scipy's
+    # Rotation, which the frames are checked against), the filters' design (scipy.signal) and the
+    # hold's Riccati solution (scipy.linalg). numba and pinocchio are used where installed, never
+    # needed: the pure path and the kernels' own UR5 geometry (hoh_cosim.control.jit)
+    requires: tuple[str, ...] = ("numpy", "scipy")
 
     @property
     def random(self) -> bool:
@@ -53,6 +59,7 @@ KINDS: dict[str, ComponentKind] = {
             "hoh_operator",
             "the sonographer's hand: a delayed impedance driving a task",
             starts_from="plant",
+            requires=("numpy",),
         ),
         ComponentKind(
             "plant", Plant, PlantParams, "hoh_plant", "UR5 under speedL, probe housing and phantom"
@@ -101,6 +108,8 @@ KINDS: dict[str, ComponentKind] = {
             PandaParams,
             "hoh_panda",
             "torque-controlled Franka Panda, probe and phantom (seed 001)",
+            # its forward dynamics are pinocchio's (ABA): no own implementation to fall back on
+            requires=("numpy", "pin"),
         ),
         ComponentKind(
             "impedance",
@@ -124,6 +133,7 @@ KINDS: dict[str, ComponentKind] = {
             BreathingParams,
             "hoh_breathing",
             "the patient's breathing: the phantom's surface along its normal",
+            requires=("numpy",),
         ),
         ComponentKind(
             "freehand",

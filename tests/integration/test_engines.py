@@ -26,6 +26,7 @@ import pytest
 from hoh_cosim.cli import main
 from hoh_cosim.cosim.engines import simulate
 from hoh_cosim.cosim.external import ENGINE_COUPLING, import_ecospy, simulate_external
+from hoh_cosim.cosim.portable import compared_rows as portable_rows
 from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import compute_report
 from hoh_cosim.cosim.scenario import load_scenario
@@ -52,22 +53,9 @@ def _numeric(metrics: dict) -> dict[str, float]:
 
 
 def compared_rows(engine: Recording, master: Recording) -> np.ndarray:
-    """The ticks on which an engine must agree with our master to rounding.
-
-    libcosim shows no values before its first step: row 0 is left out. ecos's clock is a running
-    sum of the base step, 2e-13 s behind k·dt after 3000 steps, so a switch that falls exactly on a
-    whole second (the hand takes the handle at 3 s) comes one step of its component later there:
-    the 4 ticks after a 0/1 output of our master switches are left out for ecos (measured: all
-    differences lie within them, 2999-3002 on contact_scan)."""
-    rows = np.ones(len(master.time), dtype=bool)
-    if engine.engine == "libcosim":
-        rows[0] = False
-    if engine.engine == "ecos":
-        for column in master.values.T:
-            if set(np.unique(column)) <= {0.0, 1.0}:
-                for switch in np.nonzero(np.diff(column))[0] + 1:
-                    rows[switch : switch + 5] = False
-    return rows
+    """The ticks on which an engine must agree with our master to rounding (the export check's
+    rule: `hoh_cosim.cosim.portable.compared_rows`)."""
+    return portable_rows(engine.engine, master.values)
 
 
 def assert_same_outputs(engine: Recording, master: Recording, until_s: float = 8.0) -> None:

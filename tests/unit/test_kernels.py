@@ -34,6 +34,7 @@ from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FT150Params, FT150Sensor
 from plant_models.tissue import PhantomParams
 from plant_models.tool import CableDrag, ToolModel
+from plant_models.ur5 import FramePlacement
 from tests.estimates import controller_inputs
 from tests.streams import SensorStream
 
@@ -260,6 +261,28 @@ def test_ur5_kinematics_match_pinocchio():
         agree.add("accel_P", model.acceleration("probe_sensor")[:3], k[L["accel_P"]])
         for frame in model.frame_ids:
             agree.add(f"J {frame}", model.jacobian(q, frame), kernel.jacobian(q, frame))
+    name, worst = agree.worst()
+    assert worst < REL, f"{name}: {worst:.3g}"
+
+
+def test_ur5_kinematics_without_pinocchio_match_pinocchio():
+    # the kernels' own geometry of the chain (ur5.chain_geometry: an FMU's host without pinocchio)
+    plant = Plant()
+    model = plant.model
+    frames = tuple(
+        FramePlacement(name, p_EX_E, R_EX)
+        for name, (p_EX_E, R_EX) in plant.params.tool.flange_frames().items()
+    )
+    own, reference = KernelUR5(None, frames), KernelUR5(model)
+    assert own.frame_ids.keys() == reference.frame_ids.keys()
+    np.testing.assert_allclose(own._G, reference._G, rtol=0.0, atol=1e-15)
+    rng = np.random.default_rng(12)
+    agree = Agreement(floor=1.0)
+    for _ in range(100):
+        q, qd, qdd = rng.uniform(-6, 6, 6), rng.uniform(-3, 3, 6), rng.uniform(-20, 20, 6)
+        model.update(q, qd, qdd)
+        agree.add("tool", reference.tool_kinematics(q, qd, qdd), own.tool_kinematics(q, qd, qdd))
+        agree.add("J tcp", model.jacobian(q, "tcp"), own.jacobian(q, "tcp"))
     name, worst = agree.worst()
     assert worst < REL, f"{name}: {worst:.3g}"
 

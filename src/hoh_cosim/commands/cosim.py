@@ -4,7 +4,7 @@ hoh-cosim SCENARIO.yaml [--out DIR] [--engine fmu|inprocess|libcosim|ecos] [--du
                         [--coupling gauss-seidel|jacobi|jacobi-eager] [--seed N]
                         [--preset NAME|FILE] [--set component.parameter=value ...]
 hoh-cosim build-fmus [--out DIR]
-hoh-cosim export SCENARIO.yaml --out DIR [--duration S] [--seed N] [--preset NAME|FILE] [--set ...]
+hoh-cosim export SCENARIO.yaml --out DIR [--check] [--duration S] [--seed N] [--preset NAME|FILE] [--set ...]
 hoh-cosim presets [NAME|FILE] [--json]
 hoh-cosim identify-gravity POSES.csv [--out calibration.json] [--gravity GX,GY,GZ]
 """
@@ -111,6 +111,24 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     )
     export.add_argument("scenario", metavar="SCENARIO.yaml", help="the scenario to export")
     export.add_argument("--out", required=True, metavar="DIR", help="the export directory")
+    export.add_argument(
+        "--check",
+        action="store_true",
+        help=(
+            "then run each FMU alone in a clean virtual environment that has only the FMUs' "
+            "declared requirements and fmpy, and compare it with the same run here (one line "
+            "each; exit 1 if one fails)"
+        ),
+    )
+    export.add_argument(
+        "--check-engines",
+        action="store_true",
+        help=(
+            "--check, and then the exported SSP archive in libcosim and in ecos in such an "
+            "environment (with the engines added), over the scenario's duration, compared with "
+            "our master run with each engine's coupling"
+        ),
+    )
     add_scenario_options(export)
 
     presets = sub.add_parser(
@@ -283,7 +301,33 @@ def _export(args: argparse.Namespace) -> int:
     for component, path in result.fmus.items():
         print(f"{component:<11} {path}")
     print(f"wrote {result.ssp} and {result.out / 'README.md'}")
-    return 0
+    if not (args.check or args.check_engines):
+        return 0
+    from hoh_cosim.fmi.build import default_cache_dir
+    from hoh_cosim.fmi.hostcheck import HEADER, check_export
+
+    fmus = sorted(set(result.fmus.values()))
+    print(f"checking {len(fmus)} FMUs in a clean environment (made once, then reused) ...")
+    rows = check_export(fmus, default_cache_dir())
+    print(HEADER)
+    for row in rows:
+        print(row.line())
+    failed = sum(not row.ok for row in rows)
+    print(f"{len(rows) - failed} of {len(rows)} FMUs ran alone in a host without hoh-cosim")
+    if args.check_engines:
+        from hoh_cosim.cosim.portable import check_engines
+
+        print("the SSP archive in libcosim and ecos in a clean environment ...")
+        engine_rows = check_engines(result.scenario, result.out, default_cache_dir())
+        print(HEADER)
+        for row in engine_rows:
+            print(row.line())
+        bad = sum(not row.ok for row in engine_rows)
+        print(
+            f"{len(engine_rows) - bad} of {len(engine_rows)} (engine, FMU) pairs agree with our master"
+        )
+        failed += bad
+    return 1 if failed else 0
 
 
 def _fmt(values: Sequence[float], digits: int = 5, signed: bool = True) -> str:

@@ -44,11 +44,11 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
-from numba import njit, types
 
 from hoh_cosim.control.admittance import AdmittanceGains, apply_law
 from hoh_cosim.control.baselines import ButterworthFilter, OneEuroFilter
 from hoh_cosim.control.filters import LeadLowpassFilter
+from hoh_cosim.control.jit import HAVE_NUMBA, njit, types
 from hoh_cosim.control.kalman import KalmanParams, axis_transition, process_noise
 from hoh_cosim.control.passivity import PassivityController, PassivityParams
 from hoh_cosim.control.release import ReleaseDetector, ReleaseParams
@@ -88,13 +88,14 @@ _enabled: bool | None = None
 
 
 def kernels_enabled() -> bool:
-    """Whether blocks built now take the compiled path (the default) or the pure one."""
+    """Whether blocks built now take the compiled path (the default where numba is installed) or
+    the pure one (always where it is not: `hoh_cosim.control.jit`)."""
     global _enabled
     if _enabled is None:
         mode = os.environ.get(_ENV, "compiled")
         if mode not in KERNEL_MODES:
             raise ConfigError(f"{_ENV}: expected one of {', '.join(KERNEL_MODES)}, got {mode!r}")
-        _enabled = mode == "compiled"
+        _enabled = mode == "compiled" and HAVE_NUMBA
     return _enabled
 
 
@@ -103,7 +104,7 @@ def use_kernels(enabled: bool) -> Iterator[None]:
     """Blocks built inside the `with` take the compiled path if `enabled`, else the pure one."""
     global _enabled
     before = kernels_enabled()
-    _enabled = bool(enabled)
+    _enabled = bool(enabled) and HAVE_NUMBA
     try:
         yield
     finally:

@@ -154,21 +154,61 @@ def _check_ssp(path: Path, system: System) -> None:
         )
 
 
+def _oldest_python(fmu_files: Sequence[Path]) -> str:
+    """The newest of the FMUs' oldest Pythons (their requirements' first lines)."""
+    oldest = (3, 10)
+    for path in fmu_files:
+        with zipfile.ZipFile(path) as archive:
+            if "resources/requirements.txt" not in archive.namelist():  # not one of ours
+                continue
+            first = archive.read("resources/requirements.txt").decode().splitlines()[0]
+        major, minor = first.rsplit(" ", 1)[-1].split(".")
+        oldest = max(oldest, (int(major), int(minor)))
+    return f"{oldest[0]}.{oldest[1]}"
+
+
 def _libpython() -> str:
     name = sysconfig.get_config_var("INSTSONAME") or sysconfig.get_config_var("LDLIBRARY")
     return str(Path(sysconfig.get_config_var("LIBDIR") or "") / (name or "libpython3.so"))
 
 
 def _readme(
-    scenario: Scenario, system: System, ssp_name: str, fmus: dict[str, str], command: str
+    scenario: Scenario,
+    system: System,
+    ssp_name: str,
+    fmus: dict[str, str],
+    command: str,
+    fmu_files: Sequence[Path],
 ) -> str:
     from hoh_cosim.fmi.docs import kind_variables
+    from hoh_cosim.fmi.hostcheck import declared_requirements
+
+    requirements = declared_requirements(fmu_files, strict=False)
+    oldest = _oldest_python(fmu_files)
 
     components = scenario.components
     dt = scenario.dt_s
     python = f"{sys.version_info.major}.{sys.version_info.minor}"
+    needs = ", ".join(requirements)
     lines = [
         f"# {scenario.name}: the co-simulation system, exported",
+        "",
+        f"**What a host needs**: Linux x86_64 with a GCC 12-era C++ runtime (Debian 12, Ubuntu "
+        f"22.04 or newer) and a Python {oldest} or newer with {needs} installed: nothing of "
+        "hoh-cosim, whose code each FMU carries in its `resources/` (each FMU's own list is its "
+        "`resources/requirements.txt`). A host that lacks one fails to instantiate the FMU with "
+        "one line naming it and the `pip install` that fixes it.",
+        "",
+        "**Check a host** (from this directory, in the host's Python, with fmpy installed):",
+        "",
+        "```sh",
+        'for f in fmus/*.fmu; do fmpy simulate "$f" --stop-time 1 > /dev/null '
+        '&& echo "ok $f" || echo "FAILED $f"; done',
+        "```",
+        "",
+        "Where hoh-cosim is installed, `hoh-cosim export SCENARIO --out DIR --check` does it for "
+        "you in a clean virtual environment with only these and fmpy, and compares each FMU's run "
+        "with the same run in hoh-cosim's own environment.",
         "",
         f"Exported by hoh-cosim {__version__} with `{command}`. {scenario.description}",
         "",
@@ -218,14 +258,15 @@ def _readme(
         "",
         "## What a host needs",
         "",
-        f"The FMUs run Python. They were built on Linux x86_64 with Python {python}; the host "
-        "needs:",
+        f"The FMUs run Python: they were built on Linux x86_64 with Python {python} and run in "
+        f"Python {oldest} or newer. The host needs:",
         "",
         "- Linux x86_64 with a GCC 12-era C++ runtime (Debian 12, Ubuntu 22.04 or newer);",
-        f"- a Python {python} environment with hoh-cosim {__version__} installed from its source "
-        "(the FMUs import `hoh_cosim` and `plant_models` from it): "
-        f'`python{python} -m venv venv && venv/bin/pip install "<the hoh-cosim checkout>[engines]"`;',
-        "- inside that Python (fmpy, libcosimpy, ecospy) nothing else;",
+        f"- a Python environment with {needs} "
+        f"(`python3 -m venv venv && venv/bin/pip install {' '.join(repr(r) for r in requirements)}`); "
+        "numba and pinocchio are used when present (compiled kernels, the reference "
+        "kinematics), never needed;",
+        "- inside that Python the importer (fmpy, libcosimpy, ecospy) and nothing else;",
         "- in a host that is not Python (a C or C++ tool on Linux): the Python library loaded "
         "before the FMUs (`LD_PRELOAD`), or they fail to load (`undefined symbol: "
         "_Py_NoneStruct`), and the environment active (its `bin/` first on `PATH`): the Python "
@@ -304,6 +345,7 @@ class ExportResult:
     out: Path
     ssp: Path
     fmus: dict[str, Path]  # component -> its FMU in the export
+    scenario: Scenario
 
 
 def export_scenario(
@@ -356,7 +398,8 @@ def export_scenario(
             system, staging, sources={c: f"fmus/{f}" for c, f in file_of.items()}
         )
         (staging / "README.md").write_text(
-            _readme(scenario, system, ssp_name, file_of, command), encoding="utf-8"
+            _readme(scenario, system, ssp_name, file_of, command, sorted(by_name.values())),
+            encoding="utf-8",
         )
         manifest = {
             "scenario": scenario.name,
@@ -386,4 +429,5 @@ def export_scenario(
         out,
         out / ssp_name,
         {c: out / "fmus" / f for c, f in file_of.items()},
+        scenario,
     )

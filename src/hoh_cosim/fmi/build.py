@@ -1,5 +1,12 @@
 """Build the project's FMUs with pythonfmu, finish their model descriptions, cache them.
 
+An FMU carries what it runs: pythonfmu's runtime (pythonfmu puts it there), the project's code
+(`hoh_cosim` and `plant_models`, sources and package data, under `resources/`) and a
+`resources/requirements.txt` naming what its host's Python must have installed (the kind's
+`requires`, with the project's own version bounds); the model description's text says the same.
+A host without hoh-cosim runs it; a host that lacks a requirement gets one line naming it
+(`hoh_cosim.fmi.host`).
+
 `ensure_fmus` returns an up-to-date FMU for each component kind, building only what is missing or
 stale. An FMU is stale when its fingerprint changes: the hash of its entry script, every Python source
 of `hoh_cosim` and `plant_models` as installed, and the versions of pythonfmu and Python. The cache
@@ -27,6 +34,7 @@ import hoh_cosim
 import plant_models
 from hoh_cosim.control.block import variable_step
 from hoh_cosim.errors import HohError, RunError
+from hoh_cosim.fmi.host import REQUIREMENTS, python_line
 from hoh_cosim.fmi.model_description import finish_model_description
 from hoh_cosim.fmi.slave import INPUT_STARTS, PARAMETERS, block_interface
 from hoh_cosim.kinds import KINDS, input_starts
@@ -38,6 +46,7 @@ __all__ = [
     "ensure_fmus",
     "fmu_name",
     "fmu_scripts_dir",
+    "host_requirements",
     "project_root",
 ]
 
@@ -87,23 +96,69 @@ def fmu_name(kind: str) -> str:
     return "Hoh" + special.get(kind, "".join(part.capitalize() for part in kind.split("_")))
 
 
-def _fingerprint(script: Path) -> str:
+def host_requirements(requires: Iterable[str]) -> str:
+    """`resources/requirements.txt` for an FMU whose code needs the distributions `requires`:
+    the oldest Python (the project's `Requires-Python`), then one line each with the project's own
+    version bounds (`numpy>=1.24`)."""
+    import importlib.metadata
+    import re
+
+    try:
+        meta = importlib.metadata.metadata("hoh-cosim")
+        declared = importlib.metadata.requires("hoh-cosim") or []
+    except importlib.metadata.PackageNotFoundError:  # pragma: no cover - always installed
+        meta, declared = None, []
+    found = re.search(r"(\d+)\.(\d+)", (meta or {}).get("Requires-Python", "") or "")
+    oldest = (int(found[1]), int(found[2])) if found else sys.version_info[:2]
+    bounds = {}
+    for line in declared:
+        if ";" in line:  # an extra's
+            continue
+        name = re.match(r"[A-Za-z0-9_.-]+", line)
+        if name:
+            bounds[name[0].lower()] = line.replace(" ", "")
+    lines = [python_line(oldest)] + [bounds.get(name.lower(), name) for name in requires]
+    return "\n".join(lines) + "\n"
+
+
+def _packed_code() -> list[tuple[str, Path]]:
+    """(name under resources/, file) for the project's code an FMU carries: every file of the
+    `hoh_cosim` and `plant_models` packages but compiled caches."""
+    files = []
+    for package in (hoh_cosim, plant_models):
+        root = Path(package.__file__).resolve().parent
+        for path in sorted(root.rglob("*")):
+            relative = path.relative_to(root.parent)
+            if path.is_file() and "__pycache__" not in relative.parts and path.suffix != ".pyc":
+                files.append((relative.as_posix(), path))
+    return files
+
+
+def _fingerprint(script: Path, requirements: str = "") -> str:
     import pythonfmu
 
     digest = hashlib.sha256()
     digest.update(script.read_bytes())
-    for package in (hoh_cosim, plant_models):
-        root = Path(package.__file__).resolve().parent
-        for path in sorted(root.rglob("*.py")):
-            digest.update(str(path.relative_to(root)).encode())
-            digest.update(path.read_bytes())
+    digest.update(requirements.encode())
+    for name, path in _packed_code():
+        digest.update(name.encode())
+        digest.update(path.read_bytes())
     digest.update(f"pythonfmu {pythonfmu.__version__} python {platform.python_version()}".encode())
     return digest.hexdigest()
 
 
 def _build(kind: str, script: Path, out: Path, defaults: Any = None) -> None:
     spec = KINDS[kind]
-    build_fmu(script, out, spec.block, spec.params, spec.description, input_starts(kind), defaults)
+    build_fmu(
+        script,
+        out,
+        spec.block,
+        spec.params,
+        spec.description,
+        input_starts(kind),
+        defaults,
+        host_requirements(spec.requires),
+    )
 
 
 def build_fmu(
@@ -114,11 +169,13 @@ def build_fmu(
     description: str,
     starts: Mapping[str, Any] | None = None,
     defaults: Any = None,
+    requirements: str | None = None,
 ) -> None:
     """Build the FMU of the entry script `script` (a `BlockSlave` subclass wrapping `block` with
     `params`, its inputs starting at `starts`, else 0, its parameters at `defaults`, else the
     block's defaults) with pythonfmu, finish its model description, and put it at `out`
-    atomically, mode 0644."""
+    atomically, mode 0644. With `requirements` (`host_requirements`), the FMU carries the
+    project's code and them: it runs in a host that never installed hoh-cosim."""
     from pythonfmu.builder import FmuBuilder
 
     kind = block.__name__
@@ -145,7 +202,7 @@ def build_fmu(
                     data = finish_model_description(
                         data,
                         specs,
-                        description,
+                        description + _needs(requirements),
                         variable_step=variable_step(block),
                         initial_from_parameters=hasattr(block, "initial_outputs"),
                     )
@@ -162,10 +219,14 @@ def build_fmu(
             resources = {INPUT_STARTS: starts}
             if defaults is not None:
                 resources[PARAMETERS] = _parameters_json(params, defaults)
-            for name, content in resources.items():
+            texts = {name: json.dumps(content, indent=1) for name, content in resources.items()}
+            if requirements is not None:
+                texts[REQUIREMENTS] = requirements
+                texts.update((name, path.read_bytes()) for name, path in _packed_code())
+            for name, text in texts.items():
                 entry = zipfile.ZipInfo(f"resources/{name}", (1980, 1, 1, 0, 0, 0))
                 entry.compress_type, entry.external_attr = zipfile.ZIP_DEFLATED, 0o100644 << 16
-                dst.writestr(entry, json.dumps(content, indent=1))
+                dst.writestr(entry, text)
         # a unique name beside the target, then one rename: a concurrent build or a reader never
         # sees half a file
         fd, part = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
@@ -177,6 +238,15 @@ def build_fmu(
         except BaseException:
             Path(part).unlink(missing_ok=True)
             raise
+
+
+def _needs(requirements: str | None) -> str:
+    """What the model description's text adds about the host: the requirements in one line."""
+    if requirements is None:
+        return ""
+    lines = requirements.splitlines()
+    python = lines[0].lstrip("# ").replace("python >= ", "Python ")
+    return f". Host: {python} or newer with {', '.join(lines[1:])} (resources/{REQUIREMENTS})"
 
 
 def _parameters_json(params_cls: type, defaults: Any) -> dict[str, Any]:
@@ -207,7 +277,7 @@ def ensure_fmus(
         if not script.is_file():
             raise HohError(f"{script}: missing: the entry script of the {kind} FMU")
         out = cache / f"{fmu_name(kind)}.fmu"
-        fingerprint = _fingerprint(script)
+        fingerprint = _fingerprint(script, host_requirements(KINDS[kind].requires))
         own = defaults.get(kind)
         values = None if own is None else _parameters_json(KINDS[kind].params, own)
         if values:  # other start values: an FMU of their own

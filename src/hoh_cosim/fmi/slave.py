@@ -55,6 +55,7 @@ from hoh_cosim.control.block import (
     variable_step,
 )
 from hoh_cosim.errors import ConfigError
+from hoh_cosim.fmi import exit_fix
 from hoh_cosim.params import leaves, with_values
 
 __all__ = [
@@ -174,6 +175,7 @@ class BlockSlave(_PythonFmuSlave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        exit_fix.protect_host()  # pythonfmu 0.7's double release at unload, in any host
         cls = type(self)
         self.description = (cls.block.__doc__ or cls.block.__name__).strip().splitlines()[0]
         self.specs = block_interface(
