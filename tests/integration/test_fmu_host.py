@@ -10,6 +10,8 @@ from its own cache).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
 import subprocess
 from pathlib import Path
@@ -25,28 +27,28 @@ ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.xdist_group(__name__)  # one export, one environment at a time
 
 
-@pytest.fixture(scope="module")
-def exported(tmp_path_factory) -> tuple[Path, str]:
-    out = tmp_path_factory.mktemp("export") / "circles"
-    import contextlib
-    import io
-
+def _export(out: Path, *options: str) -> str:
     said = io.StringIO()
     with contextlib.redirect_stdout(said):
-        status = main(
-            ["export", str(ROOT / "scenarios/circles.yaml"), "--out", str(out), "--check"]
-        )
-    return out, said.getvalue() + f"\nexit {status}"
+        status = main(["export", str(ROOT / "scenarios/circles.yaml"), "--out", str(out), *options])
+    return said.getvalue() + f"\nexit {status}"
+
+
+@pytest.fixture(scope="module", params=[2, 3], ids=["fmi2", "fmi3"])
+def exported(request, tmp_path_factory) -> tuple[Path, str, int]:
+    out = tmp_path_factory.mktemp("export") / "circles"
+    fmi = request.param
+    return out, _export(out, "--check", "--fmi", str(fmi)), fmi
 
 
 def test_every_fmu_runs_alone_in_a_host_with_only_what_it_declares(exported):
-    _, said = exported
+    _, said, fmi = exported
     assert said.endswith("exit 0"), said
     rows = [line for line in said.splitlines() if line.startswith("fmpy ")]
     assert len(rows) == 6, said
     for row in rows:
         fields = row.split()
-        assert fields[2] == "2.0", row
+        assert fields[2] == f"{fmi}.0", row
         assert float(fields[3]) <= 1e-9, row  # the worst difference, relative to the peak
         assert fields[4] == "ok", row
         assert "ran to 1 s, 1001 samples" in row
@@ -54,7 +56,7 @@ def test_every_fmu_runs_alone_in_a_host_with_only_what_it_declares(exported):
 
 
 def test_an_fmu_tells_what_its_host_lacks_in_one_line(exported):
-    out, _ = exported
+    out, _, _ = exported
     python = host_python([_importer()], default_cache_dir() / "hosts")
     fmpy_cli = "import sys; from fmpy.cli import main; sys.argv[0] = 'fmpy'; sys.exit(main())"
     done = subprocess.run(
@@ -81,8 +83,19 @@ def test_an_fmu_tells_what_its_host_lacks_in_one_line(exported):
 
 
 def test_the_exports_readme_starts_with_what_a_host_needs(exported):
-    out, _ = exported
+    out, _, fmi = exported
     head = "\n".join((out / "README.md").read_text().splitlines()[:20])
     assert "numpy>=" in head
     assert "scipy>=" in head
     assert "--check" in head
+    assert f"the FMI {fmi}.0 co-simulation FMUs" in (out / "README.md").read_text()
+
+
+def test_an_fmi_version_other_than_2_or_3_is_one_line_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "x"
+    status = main(["export", str(ROOT / "scenarios/circles.yaml"), "--out", str(out), "--fmi", "4"])
+    assert status == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert "--fmi: invalid choice: 4 (choose from 2, 3)" in err
+    assert not out.exists()

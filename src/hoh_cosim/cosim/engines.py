@@ -419,12 +419,14 @@ def simulate(
     progress: bool = True,
     observer: Callable[[int, float], None] | None = None,
     coupling: str = "gauss-seidel",
+    fmi: int = 2,
 ) -> Recording:
     """Run `scenario` with `engine` and record every output.
 
     "fmu" and "inprocess" are our master, with `coupling` "gauss-seidel" (the file's order, the
     default), "jacobi" or "jacobi-eager" (libcosim's and ecos's); "libcosim" and "ecos" run the
-    same FMUs in those engines (`hoh_cosim.cosim.external`), with their own coupling.
+    same FMUs in those engines (`hoh_cosim.cosim.external`), with their own coupling. `fmi`: the
+    version of the FMUs the "fmu" engine builds (2 or 3; a scenario's own FMU is what it is).
     """
     if engine not in ENGINES:
         raise ConfigError(f"--engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
@@ -447,9 +449,15 @@ def simulate(
             if fmu_paths is None:
                 from hoh_cosim.fmi.build import ensure_fmus
 
-                fmu_paths = ensure_fmus(sorted({c.kind.name for c in components if c.fmu is None}))
+                kinds = sorted({c.kind.name for c in components if c.fmu is None})
+                fmu_paths = ensure_fmus(kinds, fmi=fmi)
+            from hoh_cosim.cosim.fmi3_runtime import Fmu3Runtime, fmi_version
+
             log = _FmuLog()
-            runtimes = [FmuRuntime(c, c.fmu or fmu_paths[c.kind.name], log) for c in components]
+            for c in components:  # FMI 3.0 FMUs by Fmu3Runtime, the others by FmuRuntime
+                path = c.fmu or fmu_paths[c.kind.name]
+                fmu_runtime = Fmu3Runtime if fmi_version(path) == "3.0" else FmuRuntime
+                runtimes.append(fmu_runtime(c, path, log))
         else:
             runtimes = [InProcessRuntime(c) for c in components]
         return _run(scenario, engine, runtimes, progress, observer, coupling)

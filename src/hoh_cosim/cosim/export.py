@@ -179,6 +179,7 @@ def _readme(
     fmus: dict[str, str],
     command: str,
     fmu_files: Sequence[Path],
+    fmi: int = 2,
 ) -> str:
     from hoh_cosim.fmi.docs import kind_variables
     from hoh_cosim.fmi.hostcheck import declared_requirements
@@ -228,7 +229,7 @@ def _readme(
         f"parameter values as the inline parameter set `{PARAMETER_SET}`, step sizes as OSP "
         "annotations) and the FMUs in `resources/` |",
         "| `OspSystemStructure.xml` | the same system in libcosim's own format, FMUs from `fmus/` |",
-        "| `fmus/` | the FMI 2.0 co-simulation FMUs, each checked with `fmpy validate` |",
+        f"| `fmus/` | the FMI {fmi}.0 co-simulation FMUs, each checked with `fmpy validate` |",
         "| `export.json` | what was exported, and each FMU's SHA-256 |",
         "",
         "## The system",
@@ -357,9 +358,11 @@ def export_scenario(
     seed: int | None = None,
     command: str | None = None,
     preset: str | None = None,
+    fmi: int = 2,
 ) -> ExportResult:
     """Write the scenario's FMUs, SSP archive, OSP system structure and README into `out`; the
-    estimator's and the controller's FMUs start from the scenario's preset (`preset`: another)."""
+    estimator's and the controller's FMUs start from the scenario's preset (`preset`: another);
+    `fmi` 3: FMI 3.0 FMUs (else 2.0)."""
     from hoh_cosim.fmi.build import ensure_fmus
     from hoh_cosim.results import check_out_dir, replace_dir
 
@@ -368,7 +371,7 @@ def export_scenario(
     check_out_dir(out, marker="export.json", what="export")
     kinds = sorted({c.kind.name for c in scenario.components.values() if c.fmu is None})
     defaults = {} if scenario.preset is None else dict(scenario.preset.params)
-    system = system_of(scenario, ensure_fmus(kinds, defaults=defaults))
+    system = system_of(scenario, ensure_fmus(kinds, defaults=defaults, fmi=fmi))
     for fmu in sorted(set(system.fmus.values())):
         _validate_fmu(fmu)
     file_of = {name: fmu.name for name, fmu in system.fmus.items()}
@@ -398,7 +401,7 @@ def export_scenario(
             system, staging, sources={c: f"fmus/{f}" for c, f in file_of.items()}
         )
         (staging / "README.md").write_text(
-            _readme(scenario, system, ssp_name, file_of, command, sorted(by_name.values())),
+            _readme(scenario, system, ssp_name, file_of, command, sorted(by_name.values()), fmi),
             encoding="utf-8",
         )
         manifest = {

@@ -89,6 +89,9 @@ class System:
         return self.scenario.components[component].every * self.scenario.dt_s
 
 
+_FMI2_TYPE = {"Float64": "Real", "Float32": "Real", "Int32": "Integer", "Int64": "Integer"}
+
+
 def _fmi_value(var_type: str, value: Any) -> float | int | bool | str:
     return {"Real": float, "Integer": int, "Boolean": bool, "String": str}[var_type](value)
 
@@ -111,7 +114,8 @@ def system_of(scenario: Scenario, fmu_paths: dict[str, Path] | None = None) -> S
             md = read_model_description(str(fmus[c.name]))
         except Exception as exc:
             raise ConfigError(f"{fmus[c.name]}: cannot read the FMU: {exc}") from None
-        types = {v.name: v.type for v in md.modelVariables}
+        # FMI 3.0's types under the names of FMI 2.0's (SSP 1.0 and the engines speak those)
+        types = {v.name: _FMI2_TYPE.get(v.type, v.type) for v in md.modelVariables}
         value_refs[c.name] = {v.name: v.valueReference for v in md.modelVariables}
         values: list[FmiVariable] = []
         wanted = [(leaf.name, leaf.value) for leaf in leaves(c.params)]

@@ -200,16 +200,18 @@ def run_scenario(
     plots: bool = True,
     fmt: str = "parquet",
     preset: str | None = None,
+    fmi: int = 2,
 ) -> RunResult:
     """Load, run, measure and write one scenario; `out` defaults to runs/<scenario name>, the
     signals as `fmt` ("parquet" or "csv"), `preset` the estimator's and the controller's
-    (`hoh_cosim.presets`; default: the scenario's)."""
+    (`hoh_cosim.presets`; default: the scenario's), `fmi` the FMI version of the fmu engine's
+    FMUs."""
     if fmt not in FORMATS:
         raise ConfigError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
     scenario = load_scenario(path, overrides, duration_s, seed, preset)
     out_dir = Path(out) if out is not None else Path("runs") / scenario.name
     check_out_dir(out_dir)
-    rec = simulate(scenario, engine, progress=progress, coupling=coupling)
+    rec = simulate(scenario, engine, progress=progress, coupling=coupling, fmi=fmi)
     report = compute_report(scenario, rec)
     summary = summary_of(scenario, rec, report, overrides)
     images: dict[str, bytes] = {}

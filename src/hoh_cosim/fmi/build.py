@@ -33,7 +33,7 @@ from typing import Any
 import hoh_cosim
 import plant_models
 from hoh_cosim.control.block import variable_step
-from hoh_cosim.errors import HohError, RunError
+from hoh_cosim.errors import ConfigError, HohError, RunError
 from hoh_cosim.fmi.host import REQUIREMENTS, python_line
 from hoh_cosim.fmi.model_description import finish_model_description
 from hoh_cosim.fmi.slave import INPUT_STARTS, PARAMETERS, block_interface
@@ -41,6 +41,7 @@ from hoh_cosim.kinds import KINDS, input_starts
 from hoh_cosim.params import leaves
 
 __all__ = [
+    "FMI_VERSIONS",
     "build_fmu",
     "default_cache_dir",
     "ensure_fmus",
@@ -134,17 +135,40 @@ def _packed_code() -> list[tuple[str, Path]]:
     return files
 
 
-def _fingerprint(script: Path, requirements: str = "") -> str:
-    import pythonfmu
+def _fingerprint(entry: bytes, requirements: str = "", fmi: int = 2) -> str:
+    if fmi == 3:
+        import pythonfmu3 as builder
+    else:
+        import pythonfmu as builder  # type: ignore[no-redef]
 
     digest = hashlib.sha256()
-    digest.update(script.read_bytes())
+    digest.update(entry)
     digest.update(requirements.encode())
     for name, path in _packed_code():
         digest.update(name.encode())
         digest.update(path.read_bytes())
-    digest.update(f"pythonfmu {pythonfmu.__version__} python {platform.python_version()}".encode())
+    digest.update(
+        f"{builder.__name__} {builder.__version__} python {platform.python_version()}".encode()
+    )
     return digest.hexdigest()
+
+
+def _build3(kind: str, out: Path, defaults: Any = None) -> None:
+    """The kind's FMI 3.0 FMU (`hoh_cosim.fmi.build3`), carrying what its FMI 2.0 FMU carries."""
+    from hoh_cosim.fmi.build3 import build_kind3, pythonfmu_package
+
+    spec = KINDS[kind]
+    requirements = host_requirements(spec.requires)
+    resources: dict[str, str | bytes] = {REQUIREMENTS: requirements}
+    resources.update((name, path.read_bytes()) for name, path in _packed_code())
+    resources.update(pythonfmu_package())  # the adapter's interface imports it
+    build_kind3(
+        kind,
+        out,
+        defaults,
+        description=spec.description + _needs(requirements),
+        resources=resources,
+    )
 
 
 def _build(kind: str, script: Path, out: Path, defaults: Any = None) -> None:
@@ -255,17 +279,27 @@ def _parameters_json(params_cls: type, defaults: Any) -> dict[str, Any]:
     return {leaf.name: leaf.value for leaf in leaves(defaults) if before[leaf.name] != leaf.value}
 
 
+FMI_VERSIONS = (2, 3)
+"""The FMI versions the FMUs are built for: 2.0 (pythonfmu) and 3.0 (pythonfmu3)."""
+
+
 def ensure_fmus(
     kinds: Iterable[str],
     cache_dir: Path | None = None,
     force: bool = False,
     defaults: Mapping[str, Any] | None = None,
+    fmi: int = 2,
 ) -> dict[str, Path]:
     """An up-to-date FMU for every kind, building the missing and the stale ones; `defaults`
     gives a kind's parameters other start values than its block's (a preset's): such an FMU is
-    kept apart, under `defaults/<its values' hash>/`."""
+    kept apart, under `defaults/<its values' hash>/`. `fmi` 3: FMI 3.0 FMUs, kept under `fmi3/`
+    of the cache."""
+    if fmi not in FMI_VERSIONS:
+        raise ConfigError(f"--fmi: expected 2 or 3, got {fmi!r}")
     defaults = defaults or {}
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    if fmi == 3:
+        cache = cache / "fmi3"
     try:
         cache.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -277,7 +311,12 @@ def ensure_fmus(
         if not script.is_file():
             raise HohError(f"{script}: missing: the entry script of the {kind} FMU")
         out = cache / f"{fmu_name(kind)}.fmu"
-        fingerprint = _fingerprint(script, host_requirements(KINDS[kind].requires))
+        entry = script.read_bytes()
+        if fmi == 3:
+            from hoh_cosim.fmi.build3 import entry_script3
+
+            entry = entry_script3(fmu_name(kind), KINDS[kind].block, KINDS[kind].params).encode()
+        fingerprint = _fingerprint(entry, host_requirements(KINDS[kind].requires), fmi)
         own = defaults.get(kind)
         values = None if own is None else _parameters_json(KINDS[kind].params, own)
         if values:  # other start values: an FMU of their own
@@ -290,7 +329,10 @@ def ensure_fmus(
             own = None
         stamp = out.with_suffix(".fmu.sha256")
         if force or not out.is_file() or not stamp.is_file() or stamp.read_text() != fingerprint:
-            _build(kind, script, out, own)
+            if fmi == 3:
+                _build3(kind, out, own)
+            else:
+                _build(kind, script, out, own)
             stamp_part = stamp.with_name(f".{stamp.name}.{os.getpid()}")
             stamp_part.write_text(fingerprint)
             os.replace(stamp_part, stamp)

@@ -33,7 +33,15 @@ import numpy as np
 from hoh_cosim.errors import RunError
 from hoh_cosim.fmi.host import REQUIREMENTS
 
-__all__ = ["AloneRun", "check_export", "declared_requirements", "host_python", "run_alone"]
+__all__ = [
+    "AloneRun",
+    "CheckRow",
+    "check_export",
+    "declared_requirements",
+    "fmi_version",
+    "host_python",
+    "run_alone",
+]
 
 _ALONE = """
 import sys
@@ -202,10 +210,11 @@ class CheckRow:
     ok: bool
     what: str
     worst: float
+    skipped: bool = False  # the importer cannot load this FMU at all (said in `what`)
 
     def line(self) -> str:
         worst = f"{self.worst:.1e}" if np.isfinite(self.worst) else "-"
-        status = "ok" if self.ok else "FAILED"
+        status = "skip" if self.skipped else "ok" if self.ok else "FAILED"
         return (
             f"{self.importer:<9} {self.fmu:<16} {self.fmi:<4} {worst:>9}  {status:<6} {self.what}"
         )
@@ -214,7 +223,7 @@ class CheckRow:
 HEADER = f"{'importer':<9} {'FMU':<16} {'FMI':<4} {'worst':>9}  result"
 
 
-def _fmi_version(fmu: Path) -> str:
+def fmi_version(fmu: Path) -> str:
     from fmpy import read_model_description
 
     return read_model_description(str(fmu)).fmiVersion
@@ -231,7 +240,7 @@ def check_export(
     rows = []
     for fmu in fmus:
         there = run_alone(python, fmu, stop_time)
-        name, fmi = fmu.stem, _fmi_version(fmu)
+        name, fmi = fmu.stem, fmi_version(fmu)
         if there.error is not None:
             rows.append(CheckRow("fmpy", name, fmi, False, there.error, float("nan")))
             continue
