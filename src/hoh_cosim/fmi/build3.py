@@ -39,10 +39,9 @@ from xml.etree import ElementTree as ET
 
 from hoh_cosim.control.block import variable_step
 from hoh_cosim.errors import ConfigError, RunError
-from hoh_cosim.fmi.model_description import DEFAULT_EXPERIMENT
+from hoh_cosim.fmi.model_description import DEFAULT_EXPERIMENT, unit_element
 from hoh_cosim.fmi.slave import VariableSpec, block_interface
 from hoh_cosim.fmi.slave3 import FMI3_TYPE, INPUT_STARTS, PARAMETERS, TIME
-from hoh_cosim.fmi.units import base_units
 from hoh_cosim.kinds import KINDS, input_starts
 from hoh_cosim.params import leaves
 
@@ -278,19 +277,6 @@ def _changed_parameters(params_cls: type, defaults: Any) -> dict[str, Any]:
     return {leaf.name: leaf.value for leaf in leaves(defaults) if before[leaf.name] != leaf.value}
 
 
-def _unit_element(name: str) -> ET.Element:
-    """A Unit, with its SI base units where it has an integer expansion (`hoh_cosim.fmi.units`)."""
-    unit = ET.Element("Unit", {"name": name})
-    expansion = base_units(name)
-    if expansion is not None and (expansion[0] or expansion[1] != 1.0):
-        exponents, factor = expansion
-        attrib = {k: str(v) for k, v in exponents.items()}
-        if factor != 1.0:
-            attrib["factor"] = repr(factor)
-        ET.SubElement(unit, "BaseUnit", attrib)
-    return unit
-
-
 def _set_start(var: ET.Element, spec: VariableSpec) -> None:
     """The build's start value, exact: 17 digits for a Float64 (pythonfmu3 writes 16)."""
     if spec.start is None or spec.causality == "output":
@@ -358,7 +344,7 @@ def finish_model_description3(
     cosimulation.set("canSerializeFMUState", "true")
     unit_definitions = ET.Element("UnitDefinitions")
     for name in sorted(set(units)):
-        unit_definitions.append(_unit_element(name))
+        unit_definitions.append(unit_element(name))
     new = {
         "UnitDefinitions": unit_definitions,
         "DefaultExperiment": ET.Element("DefaultExperiment", DEFAULT_EXPERIMENT),

@@ -26,7 +26,7 @@ from xml.etree import ElementTree as ET
 from hoh_cosim.fmi.slave import VariableSpec
 from hoh_cosim.fmi.units import base_units
 
-__all__ = ["DEFAULT_EXPERIMENT", "finish_model_description"]
+__all__ = ["DEFAULT_EXPERIMENT", "finish_model_description", "unit_element"]
 
 DEFAULT_EXPERIMENT = {"startTime": "0.0", "stopTime": "10.0", "stepSize": "0.001"}
 # fmiModelDescription's children, in the order the FMI 2.0 schema requires
@@ -43,7 +43,9 @@ _ORDER = (
 )
 
 
-def _unit_element(name: str) -> ET.Element:
+def unit_element(name: str) -> ET.Element:
+    """A Unit, with its SI base units where it has an integer expansion (`hoh_cosim.fmi.units`);
+    the same element in FMI 2.0 and 3.0."""
     unit = ET.Element("Unit", {"name": name})
     expansion = base_units(name)
     if expansion is not None and (expansion[0] or expansion[1] != 1.0):
@@ -102,7 +104,7 @@ def finish_model_description(
             root.remove(old)
     unit_definitions = ET.Element("UnitDefinitions")
     for name in sorted(units):
-        unit_definitions.append(_unit_element(name))
+        unit_definitions.append(unit_element(name))
     structure = ET.Element("ModelStructure")
     initial = " ".join(map(str, parameters)) if initial_from_parameters else ""
     for tag, dependencies in (("Outputs", ""), ("InitialUnknowns", initial)):
