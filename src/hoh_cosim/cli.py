@@ -43,7 +43,8 @@ def _main_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(
         prog="hoh-cosim",
         description="Hand-over-hand control of a robot-held ultrasound probe.",
-        epilog="Run a scenario with 'hoh-cosim SCENARIO.yaml'. Commands: " + ", ".join(SUBCOMMANDS),
+        epilog="A scenario runs with 'hoh-cosim run SCENARIO.yaml' or, short, "
+        "'hoh-cosim SCENARIO.yaml'. Each command has its --help.",
     )
     parser.add_argument("--version", action="version", version=f"hoh-cosim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=ArgumentParser)
@@ -62,8 +63,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: list[str]) -> int:
     try:
-        if argv[:1] == ["run"]:  # `hoh-cosim run SCENARIO.yaml`: the bare form's synonym
-            argv = argv[1:]
         if argv and not argv[0].startswith("-") and argv[0] not in SUBCOMMANDS:
             return cosim_commands.run_scenario_command(argv, SUBCOMMANDS)
         args = _main_parser().parse_args(argv)

@@ -4,6 +4,8 @@ leaves nothing half-written that looks like a result."""
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
 import shutil
 import tempfile
@@ -19,14 +21,48 @@ FORMATS = ("parquet", "csv")  # of a run's signals.*: compact and typed, or text
 
 def check_writable(directory: Path, option: str) -> None:
     """Refuse, before any work, a directory where nothing can be written: make it (and its
-    parents) if need be, then create and remove a file in it."""
+    parents) if need be, then create and remove a file in it. A refusal names the real cause (a
+    file where a folder must be, a read-only file system, ...) and leaves no folder made."""
+    chain = [directory, *directory.parents]
+    missing = chain[: chain.index(_deepest_existing(chain))]
     try:
         directory.mkdir(parents=True, exist_ok=True)
         fd, probe = tempfile.mkstemp(prefix=".hoh-cosim-write-check-", dir=directory)
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
-        raise ConfigError(f"{option}: cannot write in {directory}: {exc.strerror or exc}") from None
+        base = _deepest_existing(chain)  # where it stopped
+        cause = _why_unwritable(base, exc, itself=base == directory)
+        for made in missing:  # deepest first
+            with contextlib.suppress(OSError):
+                made.rmdir()
+        raise ConfigError(f"{option}: cannot write in {directory}: {cause}") from None
+
+
+def _deepest_existing(chain: list[Path]) -> Path:
+    return next((p for p in chain if os.path.lexists(p)), chain[-1])
+
+
+def _why_unwritable(base: Path, exc: OSError, itself: bool) -> str:
+    """Why nothing could be made in `base`, the deepest part of the path that exists (`itself`:
+    the directory asked for), in words that fit what is there: the operating system's reason alone
+    can mislead (creating a folder in /proc says "No such file or directory")."""
+    name = "it" if itself else str(base)
+    if base.is_symlink() and not base.exists():
+        return f"{name} is a link to {os.readlink(base)}, which does not exist"
+    if not base.is_dir():
+        return f"{name} is a file, not a folder" if base.is_file() else f"{name} is not a folder"
+    try:
+        read_only = bool(os.statvfs(base).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):  # AttributeError: no statvfs (Windows)
+        read_only = False
+    if read_only or exc.errno == errno.EROFS:
+        return f"{name} is on a read-only file system"
+    if exc.errno == errno.ENOENT:
+        return f"{name} exists, but no file or folder can be created in it"
+    if itself:
+        return exc.strerror or str(exc)
+    return f"no folder can be created in {name}: {exc.strerror or exc}"
 
 
 def check_out_dir(out: Path, marker: str = "summary.json", what: str = "run") -> None:

@@ -11,16 +11,48 @@ Each family module has `add_commands(sub)` (its subcommands on the main parser) 
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILED", "EXIT_OK", "ArgumentParser", "add_set_option"]
+__all__ = [
+    "EXIT_BAD_INPUT",
+    "EXIT_FAILED",
+    "EXIT_OK",
+    "ArgumentParser",
+    "HelpFormatter",
+    "add_set_option",
+]
 
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's help, where an option that takes a value always says its default: its help says
+    it (the word "default" in it), else " (default: X)" is added from the option's default. An
+    option without one (None, or an empty list) must say in its help what happens when it is left
+    out, e.g. "(default: runs/<scenario name>)" or "(default: none)"."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        help = action.help
+        if (
+            help
+            and action.option_strings
+            and action.nargs != 0
+            and "default" not in help
+            and action.default not in (None, argparse.SUPPRESS, [], ())
+        ):
+            help += " (default: %(default)s)"
+        return help
+
+
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse that reports usage mistakes as one line with exit status 2 (its own default too)."""
+    """argparse that reports usage mistakes as one line with exit status 2 (its own default too),
+    and shows every option's default in its help (`HelpFormatter`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: {message} (see --help)\n")

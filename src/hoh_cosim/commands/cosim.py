@@ -1,8 +1,8 @@
 """The co-simulation commands of `hoh-cosim`:
 
-hoh-cosim SCENARIO.yaml [--out DIR] [--engine fmu|inprocess|libcosim|ecos] [--duration S]
-                        [--coupling gauss-seidel|jacobi|jacobi-eager] [--seed N]
-                        [--preset NAME|FILE] [--set component.parameter=value ...]
+hoh-cosim [run] SCENARIO.yaml [--out DIR] [--engine fmu|inprocess|libcosim|ecos] [--duration S]
+                              [--coupling gauss-seidel|jacobi|jacobi-eager] [--seed N]
+                              [--preset NAME|FILE] [--set component.parameter=value ...]
 hoh-cosim build-fmus [--out DIR]
 hoh-cosim export SCENARIO.yaml --out DIR [--check] [--duration S] [--seed N] [--preset NAME|FILE] [--set ...]
 hoh-cosim presets [NAME|FILE] [--json]
@@ -28,7 +28,7 @@ from hoh_cosim.results import FORMATS
 
 __all__ = ["COMMANDS", "add_commands", "run_command", "run_scenario_command"]
 
-COMMANDS = ("build-fmus", "export", "identify-gravity", "presets")
+COMMANDS = ("run", "build-fmus", "export", "identify-gravity", "presets")
 
 
 def _gravity(text: str) -> list[float]:
@@ -91,7 +91,15 @@ def check_seed(args: argparse.Namespace) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    """`build-fmus`, `export` and `identify-gravity` on the main parser's subparsers."""
+    """`run`, `build-fmus`, `export`, `presets` and `identify-gravity` on the main parser's
+    subparsers."""
+    run = sub.add_parser(
+        "run",
+        help="run a co-simulation scenario and write its results",
+        description=_RUN_DESCRIPTION,
+    )
+    _add_run_arguments(run)
+
     build = sub.add_parser(
         "build-fmus",
         help="build every component's FMU",
@@ -182,17 +190,27 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     )
 
 
+_RUN_DESCRIPTION = (
+    "Run a co-simulation scenario and write signals.parquet (or signals.csv), summary.json and "
+    "plots into the output directory. 'hoh-cosim SCENARIO.yaml' is short for 'hoh-cosim run "
+    "SCENARIO.yaml'."
+)
+
+
 def _scenario_parser(others: Sequence[str]) -> argparse.ArgumentParser:
+    """The bare `hoh-cosim SCENARIO.yaml`'s parser: the `run` command's arguments."""
     parser = ArgumentParser(
         prog="hoh-cosim",
         usage="hoh-cosim SCENARIO.yaml [options]",
-        description=(
-            "Run a co-simulation scenario and write signals.parquet (or signals.csv), "
-            "summary.json and plots into the output directory. 'hoh-cosim run SCENARIO.yaml' "
-            "is the same."
-        ),
+        description=_RUN_DESCRIPTION,
         epilog="Other commands: " + ", ".join(others) + " (see hoh-cosim COMMAND --help).",
     )
+    _add_run_arguments(parser)
+    return parser
+
+
+def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """The scenario run's arguments, the same on `hoh-cosim run` and `hoh-cosim SCENARIO.yaml`."""
     parser.add_argument(
         "scenario", metavar="SCENARIO.yaml", help="the scenario (see scenarios/ and its README)"
     )
@@ -234,7 +252,6 @@ def _scenario_parser(others: Sequence[str]) -> argparse.ArgumentParser:
     parser.add_argument(
         "--quiet", action="store_true", help="no progress bar and no metric table (default: both)"
     )
-    return parser
 
 
 def _metric_text(value: object) -> str:
@@ -246,9 +263,13 @@ def _metric_text(value: object) -> str:
 
 
 def run_scenario_command(argv: Sequence[str], others: Sequence[str]) -> int:
+    """The bare `hoh-cosim SCENARIO.yaml [options]`; `others`: the commands, for its help."""
+    return _run(_scenario_parser(others).parse_args(argv))
+
+
+def _run(args: argparse.Namespace) -> int:
     from hoh_cosim.cosim.run import run_scenario
 
-    args = _scenario_parser(others).parse_args(argv)
     if args.engine in EXTERNAL_ENGINES and args.coupling != "gauss-seidel":
         raise ConfigError(
             f"--coupling {args.coupling}: --engine {args.engine} has its own coupling "
@@ -291,8 +312,11 @@ def run_scenario_command(argv: Sequence[str], others: Sequence[str]) -> int:
 def _build_fmus(args: argparse.Namespace) -> int:
     from hoh_cosim.fmi.build import default_cache_dir, ensure_fmus
     from hoh_cosim.kinds import KINDS
+    from hoh_cosim.results import check_writable
 
     out = Path(args.out) if args.out else default_cache_dir()
+    if args.out:
+        check_writable(out, f"--out {args.out}")
     paths = ensure_fmus(KINDS, out, force=args.out is not None, fmi=args.fmi)
     for kind, path in paths.items():
         print(f"{kind:<11} {path}")
@@ -359,7 +383,10 @@ def _identify_gravity(args: argparse.Namespace) -> int:
     from hoh_cosim.control.gravity import identify_gravity
     from hoh_cosim.control.vectors import GRAVITY_B
     from hoh_cosim.errors import IdentificationError, InputFileError
+    from hoh_cosim.results import check_writable
 
+    if Path(args.out).parent.exists():  # else the write says the folder does not exist
+        check_writable(Path(args.out).parent, f"--out {args.out}")
     g_B = GRAVITY_B if args.gravity is None else np.array(args.gravity)
     R_BS, wrench = read_poses_csv(args.poses)
     try:
@@ -448,6 +475,8 @@ def _preset_json(preset: Any, figures: dict[str, Any]) -> dict[str, Any]:
 
 def run_command(args: argparse.Namespace) -> int | None:
     """Run a co-simulation command if `args` names one; None otherwise."""
+    if args.command == "run":
+        return _run(args)
     if args.command == "presets":
         return _presets(args)
     if args.command == "identify-gravity":

@@ -160,7 +160,12 @@ def add_commands(sub: Any) -> None:
         "up, Ctrl-C, or a fault; every cycle is logged (MCAP).",
     )
     _add_config(run)
-    run.add_argument("--seconds", type=float, metavar="S", help="end after S seconds")
+    run.add_argument(
+        "--seconds",
+        type=float,
+        metavar="S",
+        help="end after S seconds (default: at Ctrl-C or a fault)",
+    )
     run.add_argument(
         "--log",
         metavar="FILE",
@@ -211,7 +216,9 @@ def add_commands(sub: Any) -> None:
         metavar="HOST[:PORT]",
         help="the FT-150 stream (port 63351 by default)",
     )
-    sensors.add_argument("--probe", metavar="DEVICE", help="the FSE103's serial device")
+    sensors.add_argument(
+        "--probe", metavar="DEVICE", help="the FSE103's serial device (default: none)"
+    )
     sensors.add_argument(
         "--framing",
         default="auto",
@@ -268,7 +275,7 @@ def add_commands(sub: Any) -> None:
         metavar="S+D",
         help="the hand lets go of the handle S s after it took it and takes it again D s later, "
         "e.g. 6+8: with --set controller.hold.enabled=true the robot holds the contact force "
-        "meanwhile (hold-on-release)",
+        "meanwhile (hold-on-release; default: the hand keeps hold)",
     )
     rehearse.add_argument(
         "--away",
@@ -315,7 +322,7 @@ def add_commands(sub: Any) -> None:
         default=None,
         help=(
             "drive the arm through ur-rtde and a loopback UR controller listening on HOST "
-            "(e.g. 127.0.0.1; ports 29999, 30003, 30004) instead of shared memory"
+            "(e.g. 127.0.0.1; ports 29999, 30003, 30004) instead of shared memory (the default)"
         ),
     )
     _add_rt_priority(rehearse, "the loop")
@@ -328,7 +335,7 @@ def add_commands(sub: Any) -> None:
         metavar="BLOCK.PARAM=VALUE",
         help=(
             "override an estimator or controller parameter, as in a rig file (repeatable), e.g. "
-            "controller.release.enabled=true"
+            "controller.release.enabled=true (default: the preset's values)"
         ),
     )
 
@@ -523,6 +530,7 @@ def _hw_calibrate(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else config.calibration
     if out is None:
         raise ConfigError(f"{config.path}: calibration: missing: give --out FILE")
+    check_writable(out.parent, f"--out {out}" if args.out else f"{config.path}: calibration")
     params = SequencerParams(tilts=args.tilts, directions=args.directions)
     return in_child(lambda: _calibration(config, params, args.samples, out))
 

@@ -71,7 +71,11 @@ def add_commands(sub) -> None:
     sweep.add_argument(
         "--out", metavar="DIR", help="the results directory (default: sweeps/<sweep name>)"
     )
-    sweep.add_argument("--engine", choices=("inprocess", "fmu"), help="instead of the file's")
+    sweep.add_argument(
+        "--engine",
+        choices=("inprocess", "fmu"),
+        help="the engine of every run (default: the sweep file's)",
+    )
     _cluster_options(sweep)
 
     report = sub.add_parser(
@@ -205,13 +209,14 @@ def add_commands(sub) -> None:
     add_set_option(
         clinical,
         "set a parameter in every assisted mode's runs, after the mode's preset, e.g. "
-        "controller.translation.slope=[0.04,0.04,0.04] (repeatable; freehand as it is)",
+        "controller.translation.slope=[0.04,0.04,0.04] (repeatable; freehand as it is; default: "
+        "none)",
     )
     clinical.add_argument(
         "--figures",
         metavar="FILE",
         help="also write the presets' headline figures to FILE, as 'hoh-cosim presets' shows them "
-        "(src/hoh_cosim/presets/figures.json in a checkout)",
+        "(src/hoh_cosim/presets/figures.json in a checkout; default: none)",
     )
     _cluster_options(clinical)
 
