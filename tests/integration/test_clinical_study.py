@@ -244,13 +244,13 @@ def test_hold_on_release_holds_the_breathing_contact_and_hands_back(study) -> No
         # the hands-off force against the force at the release: every operator has one, within
         # what the retake's band and the checked probe's error leave (the full study: -0.2 to
         # +1.7 N on the view, -2.2 to +0.7 N on the press; -0.4 to +2.9 and -4.6 to +0.2 N
-        # without the retake, docs/decisions.md, "The hold after the probe check"); without the
+        # without the retake, docs/decisions/0052-hold-retake.md); without the
         # check the hand's push left with its opening, 4.3-11.7 N of the press
         change = entry["contact_force_change_N"]
         assert change["n"] == OPERATORS
         assert -6.0 < change["min"] <= change["max"] < 3.5
         # held through at least a breath with the hand off, steadier than a robot that holds
-        # still (1.5-2.1 N, docs/decisions.md) and no contact lost
+        # still (1.5-2.1 N, docs/decisions/0039-clinical-study-world.md) and no contact lost
         assert entry["contact_force_std_N"]["max"] < 0.8, task
         assert entry["contact_losses"]["max"] == 0, task
         assert entry["hold_s"]["min"] > 4.0, task

@@ -6,8 +6,7 @@ Where it amplifies it (a probe sliding on the phantom under the hand's force fee
 difference grows about tenfold a second), no two codes that round differently can agree to 1e-12,
 however exact each is; there the difference must stay within what the pure path itself does when
 the start moves by one unit in the last place (a joint angle of the arm, a coordinate of the
-freehand probe; the most of three such moves) (docs/decisions.md, "Speed,
-side by side (issue 21)").
+freehand probe; the most of three such moves) (docs/decisions/0034-compiled-kernels.md).
 """
 
 from __future__ import annotations

@@ -64,8 +64,9 @@ def test_only_the_online_map_keeps_contact_compensation_safe_on_day_two(study: P
     summary = json.loads((study / "summary.json").read_text())
     runs = {(r["day"], r["correction"]): r for r in summary["contact_scan"]}
     assert all(r["status"] == "ok" for r in runs.values())
-    # the raw sensor over-reads along the axis: eq. 12 pushes the probe past the 20 N soft cap
-    # (into the 25 N stop too while the contact's moment still turned the probe, docs/decisions.md)
+    # the raw sensor over-reads along the axis: eq. 12 pushes the probe past the 20 N soft cap (into
+    # the 25 N stop too while the contact's moment still turned the probe,
+    # docs/decisions/0041-contact-torque-compensation.md)
     assert SOFT_CAP in runs["day two", "raw"]["controller_flags"]
     assert STOP in runs["day two", "network"]["controller_flags"]
     online = runs["day two", "online"]

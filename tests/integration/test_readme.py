@@ -1,4 +1,5 @@
-"""The README's promises: its code runs and prints what it says; its commands are the CI's."""
+"""The README's promises: its commands are the CI's; the architecture page's example of the
+controller core runs and prints what it says."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+ROOT = Path(__file__).resolve().parents[2]
+README = ROOT / "README.md"
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
 
 
-def _blocks(language: str) -> list[str]:
-    return re.findall(rf"^```{language}\n(.*?)^```$", README.read_text(), flags=re.S | re.M)
+def _blocks(language: str, page: Path = README) -> list[str]:
+    return re.findall(rf"^```{language}\n(.*?)^```$", page.read_text(), flags=re.S | re.M)
 
 
 def test_readme_opens_with_exactly_two_commands():
@@ -24,9 +27,9 @@ def test_readme_opens_with_exactly_two_commands():
     assert "pytest" in lines[1]
 
 
-def test_readme_example_runs_and_prints_what_it_says(tmp_path):
-    code = _blocks("python")[0]
-    promised = re.search(r"It prints `(.*?)`", README.read_text()).group(1)
+def test_the_controller_core_example_runs_and_prints_what_it_says(tmp_path):
+    code = _blocks("python", ARCHITECTURE)[0]
+    promised = re.search(r"It prints `(.*?)`", ARCHITECTURE.read_text()).group(1)
     script = tmp_path / "example.py"
     script.write_text(code)
     result = subprocess.run(

@@ -14,6 +14,7 @@ from hoh_cosim.calibration import read_calibration
 from hoh_cosim.cli import main
 from hoh_cosim.control.supervisor import Status
 from hoh_cosim.cosim.engines import simulate
+from hoh_cosim.cosim.metric_reference import METRICS as METRIC_DOCS
 from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.scenario import load_scenario
 
@@ -149,6 +150,8 @@ def test_scenario_runs_and_writes_its_results(name, engine, tmp_path, capsys):
             assert all(np.isfinite(metrics[key]))
     assert metrics["realtime_factor"] > 0
     assert metrics["wall_s"] > 0
+    # the documentation's metric reference is generated from this table: none may be missing
+    assert set(metrics) <= set(METRIC_DOCS), sorted(set(metrics) - set(METRIC_DOCS))
     header = pq.read_schema(out / "signals.parquet").names
     assert header[0] == "time"
     for signal in scenario.record:
@@ -344,7 +347,7 @@ def test_hold_on_release_keeps_the_breathing_contact_and_hands_back():
     # before the hand began to open at 13 s; held from 1 s after it was off until the retake).
     # The hold regulates the wrist's force, in which the hand resting on the handle when the hold
     # engaged is: the hand's opening takes its push off the contact, and no more than that
-    # (docs/decisions.md, "The force the hold keeps").
+    # (docs/decisions/0051-hold-after-probe-check.md).
     t = rec.time
     d = np.array([0.0, 0.0, -1.0])  # clinical_assisted's pressing direction
     pressing = -rec["plant.F_contact_B"] @ d

@@ -120,7 +120,8 @@ def test_the_default_surface_filter_follows_the_deepest_fastest_breath_closer():
     """The population's deepest, fastest breath (15 mm, 20 a minute, the breathing block's sin⁴
     shape: harmonics at the rate and twice it) under a hold: the default 3 Hz surface filter keeps
     the contact force closer than the 1.5 Hz one did, whose tracking error let 9 of the clinical
-    study's 40 hands-off runs past 0.5 N std (docs/decisions.md)."""
+    study's 40 hands-off runs past 0.5 N std
+    (docs/decisions/0048-hold-surface-filter-at-3-hz.md)."""
 
     class Breath(Patient):
         def surface(self, t: float) -> float:  # from 3 s on, once the hold holds
@@ -173,8 +174,9 @@ def _let_go(source: str) -> tuple[float, np.ndarray, np.ndarray]:
 
 
 def test_a_wrist_regulated_hold_gives_up_the_resting_hands_share_when_it_opens():
-    # the cause of the hold's image jitter in the clinical study (docs/decisions.md): the wrist
-    # regulates the contact less the hand's push, so the opening hand draws the probe back
+    # the cause of the hold's image jitter in the clinical study
+    # (docs/decisions/0046-hold-regulates-wrist-force.md): the wrist regulates the contact less the
+    # hand's push, so the opening hand draws the probe back
     level, after, _ = _let_go("wrist")
     assert level - after[-1] > 1.5
 

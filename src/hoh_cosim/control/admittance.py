@@ -126,7 +126,7 @@ ROTATION_GAINS = AdmittanceGains(
 )
 """Our rotational gains (the seed gives none): α = 0.4 rad/(s·N·m), η = 0.1 N·m. A twist of 0.5 N·m
 (5 N on a 10 cm lever) turns the probe at 0.16 rad/s; the deadband sits above our assumed torque noise
-(max about 0.06 N·m, see docs/decisions.md)."""
+(max about 0.06 N·m, see docs/decisions/0004-kalman-filter-bank.md)."""
 
 
 def apply_law(F: Vec3, gains: AdmittanceGains) -> Vec3:

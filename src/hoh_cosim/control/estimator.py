@@ -35,7 +35,7 @@ Seed 000, Fig. 5, per tick:
   housing and no play, but the grip's own torque on the handle reads as contact force, τ_g / 0.11
   m. The play (0.2-0.8 N per axis) leaves the probe's reading up to twice its width off wherever a
   contact stops moving the housing, and the hand pays that error for as long as it lasts
-  (docs/decisions.md, "The play's error across the probe"). The second low-pass follows the
+  (docs/decisions/0061-across-axis-from-wrist.md). The second low-pass follows the
   mismatch only while it is within `across_within_N` (1.2 N) and holds otherwise: a hand twisting
   the handle to tilt the probe reads as a larger one (0.35 N·m, a tilt of 0.1 rad/s under the
   rotation's default law, as 3.2 N), and followed, it would turn the hand's torque into a push
@@ -184,7 +184,7 @@ class EstimatorParams:
     g_B: Vec3 = field(default_factory=lambda: GRAVITY_B.copy())  # [m/s²]
     R_SP: Rot3 = field(default_factory=lambda: R_SP_SEED.copy())  # probe sensor P in wrist sensor S
     # [m] the point R the torque is taken about: the handle, so that the hand's push there is a
-    # force and only its twist a torque (docs/decisions.md, "Hold-on-release")
+    # force and only its twist a torque (docs/decisions/0041-contact-torque-compensation.md)
     p_SR_S: Vec3 = field(default_factory=lambda: HANDLE_S.copy())
     probe_mass_kg: float = 0.0  # [kg] what hangs below the probe sensor (the seed: not modelled)
     use_probe: bool = True

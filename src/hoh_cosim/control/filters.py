@@ -21,7 +21,8 @@ at f_c = 3.4 Hz. At the FT-150's 200 Hz its gain never exceeds 1.096, it cuts wh
 standard deviation 3.9x, and against the held reading it lags 4.4 ms at 0.25 Hz (the circles'
 frequency) and about 39 ms at 1-2 Hz: it trades the Kalman filters' lead at the loop's -180°
 crossover for the absence of their peak, which gives the default hand-robot loop a gain margin of
-2.2 instead of 1.52 (`hoh_cosim.study.linear`; `docs/decisions.md`, "A filter without a peak").
+2.2 instead of 1.52 (`hoh_cosim.study.linear`;
+`docs/decisions/0036-transparency-pieces-off-by-default.md`).
 
 Bilinear transform, s = K (1 - z⁻¹)/(1 + z⁻¹), K = 2/T, per first-order section:
     (1 + s/ω₁)/(1 + s/ω₂) → ((1 + K/ω₁) + (1 - K/ω₁) z⁻¹) / ((1 + K/ω₂) + (1 - K/ω₂) z⁻¹)

@@ -51,8 +51,8 @@ With k̂ = k, m does not depend on the robot, and κ = 1 would take the whole br
 the signal m gives moves with the tip (a probe packet inside the play, a quick push of the hand
 that ĥ has not taken yet), the feed-forward is the robot's own speed fed back: a loop of gain κ,
 which must stay under 1. With both, 0.375 of the breath's swing is left at 15 a minute (0.34-0.41
-at 12-20; g = 3 /s alone left 0.44). Measured on the clinical study's runs (docs/decisions.md,
-"Following the breath with the surface fed forward"): with κ = 0.4 and g = 1.5 /s the image is
+at 12-20; g = 3 /s alone left 0.44). Measured on the clinical study's runs
+(docs/decisions/0059-follow-surface-feed-forward.md): with κ = 0.4 and g = 1.5 /s the image is
 steadier than with g = 3 /s alone and the contact's std lower; a larger κ or g steadies the contact
 more and the image less.
 
@@ -64,8 +64,7 @@ a deep breath's 15 mm); its speed within `max_speed`; the
 supervisor's limits (speed, acceleration, soft force cap, workspace, stops) apply after it as to
 every command; it never acts out of contact, while the release detector brakes, or while the hold
 holds. Without contact compensation F̃ holds the contact too, reads as a push, and the level follows
-c at once: the follow then does nothing. Off by default (docs/decisions.md, "Following the breath
-while the hand steers").
+c at once: the follow then does nothing. Off by default (docs/decisions/0055-follow-the-breath.md).
 """
 
 from __future__ import annotations

@@ -2,12 +2,13 @@
 hand keeping the contact (the law's part, per base axis).
 
 Eq. 10 (seed 000, 3.F.1) is one slope α for every frequency of the hand's force: ẋ = α (|F̃| - η)
-sgn F̃. Its two costs pull its gains in opposite directions (docs/decisions.md, "The scan's
-effort"): the hand pays η + v / α to move the probe at v (1.75 N at 1 cm/s with the seed's gains,
-against a scan's freehand 3-4 N), and the image pays α for every newton of F̃ above 2 Hz (the
-admittance integrates it, α/s: tremor, sensor noise, the loop with the contact). A lighter law
-saves the hand and shakes the image; a heavier one steadies the image and tires the hand. Glide
-splits them by frequency, and the deadband by whether the probe already moves:
+sgn F̃. Its two costs pull its gains in opposite directions
+(docs/decisions/0054-scan-effort-and-lighter-laws.md): the hand pays η + v / α to move the probe at
+v (1.75 N at 1 cm/s with the seed's gains, against a scan's freehand 3-4 N), and the image pays α
+for every newton of F̃ above 2 Hz (the admittance integrates it, α/s: tremor, sensor noise, the loop
+with the contact). A lighter law saves the hand and shakes the image; a heavier one steadies the
+image and tires the hand. Glide splits them by frequency, and the deadband by whether the probe
+already moves:
 
     η_i     the deadband on axis i: eq. 10's η_i at rest; once the push beyond it moves the probe,
             it approaches `moving_deadband` over `settle_s` while the push keeps its sign and
@@ -39,19 +40,20 @@ law.
 
 Why it stays while the probe glides: a hand that steers by where the probe goes lets its push dip
 as the probe catches up, and the lag's part carries the probe on a little; each dip inside the
-moving deadband used to cost the hand η again, and the scan's line turns twice (docs/decisions.md,
-"Glide keeps going"). The travel it needs first keeps a push that is only the sensors' error
-across the probe (the probe sensor's play, up to twice its 0.2-0.8 N) from gliding: such a push
-moves the probe a millimetre or two before the hand holding its place stops it.
+moving deadband used to cost the hand η again, and the scan's line turns twice
+(docs/decisions/0060-glide-keeps-going.md). The travel it needs first keeps a push that is only the
+sensors' error across the probe (the probe sensor's play, up to twice its 0.2-0.8 N) from gliding:
+such a push moves the probe a millimetre or two before the hand holding its place stops it.
 
 Along the probe (z) the defaults leave the light part out (r = 1, the moving deadband the default
 η_z): a lighter law along the probe speeds up the hand's press loop, which its reaction delay
-leaves little phase for (docs/decisions.md).
+leaves little phase for (docs/decisions/0056-glide.md).
 
 Along the probe, in contact, glide is quieter instead: the image's jitter is the probe's motion
-along the beam above 2 Hz, which eq. 10 makes of F̃'s content there (the sensors' noise after
-their filters, 0.03-0.04 N each, and the hand's own force; docs/decisions.md, "Where the assisted
-modes' jitter comes from"). While the probe force along its axis exceeds `contact_N`:
+along the beam above 2 Hz, which eq. 10 makes of F̃'s content there (the sensors' noise after their
+filters, 0.03-0.04 N each, and the hand's own force;
+docs/decisions/0049-assisted-jitter-is-the-loops.md). While the probe force along its axis exceeds
+`contact_N`:
 
     w_i     = u_i + (r_i - 1) ū_i                        (the command above)
     w̄_i     w_i low-passed at `quiet_hz` (always, in contact or not)
@@ -79,7 +81,7 @@ steady 1 cm/s it carries the tip 0.34 mm further than eq. 10 would, against the 
 own 0.05 mm (the supervisor's acceleration clamp comes after; at 6 cm/s, 2 mm against its 2 mm),
 and is zero once under 1 µm/s (0.4 s after a 1 cm/s push): the law at rest asks for nothing.
 Reset whenever the controller stops, brakes after a release or holds. Only with eq. 10's law
-(`translation.law` deadband_linear). Off by default (docs/decisions.md, "Glide").
+(`translation.law` deadband_linear). Off by default (docs/decisions/0056-glide.md).
 """
 
 from __future__ import annotations

@@ -28,8 +28,7 @@ hand does freehand, and what this block does once the hand is off the handle.
                that engaged on a hand easing off rather than letting go (the release detector
                tells both) then keeps the hand's level, not the window's before it. The band must
                be above F̃'s own error along the axis with nobody's hand, under a newton only
-               after a probe check: off by default (docs/decisions.md, "The hold after the probe
-               check")
+               after a probe check: off by default (docs/decisions/0052-hold-retake.md)
     hold       along a line l, the probe axis a (handle to tip, from the estimator) unless
                `motion` says otherwise (below), z = p_BT·l the tip's depth coordinate, c the
                axial contact force (pressing positive, along a whatever the line):
@@ -42,12 +41,12 @@ hand does freehand, and what this block does once the hand is off the handle.
                    v = u l,   ω = 0
                With k̂ = k the measurement m does not depend on the robot at all (m = surface +
                depth): the robot follows a filtered surface (feed-forward) and its own exactly
-               measured position (k_z), so the force sensor's noise reaches the tip only through
-               the filter's band (3 Hz: a trade between the breath's tracking and the noise
-               passed, docs/decisions.md); a k̂ off by a factor ρ = k / k̂
-               leaves a loop of gain 1 - ρ, stable for 0 < ρ < 2. The slow integral takes out
-               what the linearisation leaves (the tissue stiffens with depth). Across the line and
-               in rotation the command is rest: the rest of the pose held
+               measured position (k_z), so the force sensor's noise reaches the tip only through the
+               filter's band (3 Hz: a trade between the breath's tracking and the noise passed,
+               docs/decisions/0048-hold-surface-filter-at-3-hz.md); a k̂ off by a factor ρ = k / k̂
+               leaves a loop of gain 1 - ρ, stable for 0 < ρ < 2. The slow integral takes out what
+               the linearisation leaves (the tissue stiffens with depth). Across the line and in
+               rotation the command is rest: the rest of the pose held
     line       (`motion`) `axis`, the default: l = a. `normal`: l starts at a and follows the
                contact's direction, the wrist's force low-passed over `normal_tau_s` while no hand
                touches (F̃ inside the quiet band, and inside the retake's band along the axis).
@@ -55,7 +54,7 @@ hand does freehand, and what this block does once the hand is off the handle.
                on the flank of the clinical study's abdomen) a hold along the axis slides the probe
                over the skin at every breath, and friction, turning over at each breath's turn and
                felt by the wrist, both moves the contact and drives the loop into a limit cycle at
-               12-16 Hz (docs/decisions.md, "The hold along the surface's normal"). Friction
+               12-16 Hz (docs/decisions/0053-hold-along-surface-normal.md). Friction
                averages out over breaths, and the mean is the normal. The filter's state, the
                tip's history and the guards' origins move with the line
     hand back  a touch of the handle: F̃ departs from its value at the engagement by more than the
@@ -75,17 +74,17 @@ Which force (`force_source`). `wrist`, the default: the axial component of the w
 newest packet (compensated, unfiltered: `F_hand_meas_B`, hand and contact together), the contact
 alone once the hand is off (the FT-150's 0.09 N σ along the probe). A hand resting on the handle
 when the hold engages is in it: its opening is a step of its share, which the loop answers by
-drawing the probe back (docs/decisions.md: the cause of the hold's image jitter in the clinical
-study, not the sensor's noise). `probe`: the probe sensor's newest packet (`F_probe_meas_B`, else
-its filtered estimate), which the hand is not in; but the housing's play (0.2-0.8 N per axis,
-seed 3.B.2) hides the contact's changes inside it, the measurement then follows the tip's own
-position (m = z), and the loop, which commands the velocity it estimates, limit-cycles at about
-1.6 Hz (3.4 N std in the clinical view): kept for the measurement, not for use. `combined`: the
-wrist's packet plus the hand's share ĥ that the probe sensor tells at a hand's event (`HandShare`):
-c = c_w + ĥ, free of the play where the contact moves under the hold, free of the hand where it
-opens or pushes. In every case m takes the tip's position when the regulated packet was sampled
-(the packet's age and `latency_s` back), and the filter predicts over that delay besides
-`lookahead_s`. The probe sensor decides contact, the setpoint, the soft cap and the stop.
+drawing the probe back (docs/decisions/0046-hold-regulates-wrist-force.md: the cause of the hold's
+image jitter in the clinical study, not the sensor's noise). `probe`: the probe sensor's newest
+packet (`F_probe_meas_B`, else its filtered estimate), which the hand is not in; but the housing's
+play (0.2-0.8 N per axis, seed 3.B.2) hides the contact's changes inside it, the measurement then
+follows the tip's own position (m = z), and the loop, which commands the velocity it estimates,
+limit-cycles at about 1.6 Hz (3.4 N std in the clinical view): kept for the measurement, not for
+use. `combined`: the wrist's packet plus the hand's share ĥ that the probe sensor tells at a hand's
+event (`HandShare`): c = c_w + ĥ, free of the play where the contact moves under the hold, free of
+the hand where it opens or pushes. In every case m takes the tip's position when the regulated
+packet was sampled (the packet's age and `latency_s` back), and the filter predicts over that delay
+besides `lookahead_s`. The probe sensor decides contact, the setpoint, the soft cap and the stop.
 `max_force_N` stays below the supervisor's soft cap (20 N) so that the loop never leans on it.
 """
 
@@ -143,7 +142,8 @@ class HoldEnd(enum.IntEnum):
 
 @dataclass(frozen=True)
 class HoldParams:
-    """Hold-on-release (module docstring). Off by default: see docs/decisions.md."""
+    """Hold-on-release (module docstring). Off by default: see
+    docs/decisions/0043-hold-on-release.md."""
 
     UNITS: ClassVar[dict[str, Any]] = {
         "stiffness_N_m": "N/m",
@@ -187,7 +187,8 @@ class HoldParams:
 
     enabled: bool = False
     # FORCE_SOURCES: what the hold regulates (module docstring); the clinical study's hold mode
-    # sets combined, rehearsed in simulation only so far (docs/decisions.md)
+    # sets combined, rehearsed in simulation only so far
+    # (docs/decisions/0045-hold-combined-force-in-study.md)
     force_source: str = "wrist"
     # MOTIONS: the line the tip moves along while held (module docstring); normal: the contact's
     # direction, the wrist's force low-passed over normal_tau_s (several breaths: friction flips
@@ -212,8 +213,8 @@ class HoldParams:
     force_noise_N: float = 0.09  # [N] σ of the regulated force's packets (FT-150 along z)
     # the surface filter's bandwidth: a breath's sin⁴ shape has its second harmonic at up to
     # 0.67 Hz (20 a minute), which a constant-acceleration filter follows with an error of about
-    # (f / observer_hz)³ of it; tremor's 8-12 Hz stays out (docs/decisions.md, "the surface
-    # filter's bandwidth")
+    # (f / observer_hz)³ of it; tremor's 8-12 Hz stays out
+    # (docs/decisions/0048-hold-surface-filter-at-3-hz.md)
     observer_hz: float = 3.0
     position_gain: float = 10.0  # k_z [1/s]
     ki: float = 0.5  # k_i [1/s]: the force error's slow integral
@@ -232,7 +233,7 @@ class HoldParams:
     ramp_N_s: float = 10.0  # [N/s] the setpoint's way from the force at the engagement
     # [N] the quiet band along the probe axis: the two sensors' filters lag differently, so a
     # contact force changing 3 N in 0.1 s (a hand opening on a held probe) reads as up to 2.6 N of
-    # F̃ along the axis for about 0.2 s (docs/decisions.md, "Hold-on-release")
+    # F̃ along the axis for about 0.2 s (docs/decisions/0043-hold-on-release.md)
     axial_band_N: float = 2.5
     raw_band_N: Vec3 = field(default_factory=lambda: frozen([1.15, 1.15, 0.31]))  # across it
     reengage_factor: float = 2.0  # a touch this many bands strong hands back at once
@@ -747,9 +748,9 @@ class ContactHold:
         the retake's band where there is one (a hand pushing on along the probe). Moving along
         the axis where the surface's normal differs slides the probe over the skin at every
         breath, and friction flips along the axis at each breath's turn; over several breaths it
-        cancels, and the mean is the normal (docs/decisions.md, "The hold along the surface's
-        normal"). The surface filter's state, the tip's history and the guards' origins (the
-        travel's, and the lost contact's) move to the new line with it."""
+        cancels, and the mean is the normal (docs/decisions/0053-hold-along-surface-normal.md). The
+        surface filter's state, the tip's history and the guards' origins (the travel's, and the
+        lost contact's) move to the new line with it."""
         p = self.params
         if touch > 1.0 or (0.0 < p.retake_band_N < abs(float(F.dot(self._axis)))):
             return
@@ -777,7 +778,7 @@ class ContactHold:
         moves only with the contact. F̃ is the wrist's force less the probe's, whose estimate
         lags the wrist's by about 60 ms: a contact that swings fast (friction turning over as a
         hand lets go) reads as F̃ of about that swing for as long (2.3 N across for 0.15 s on a
-        view, docs/decisions.md, "The hand's opening read as a touch"), which a touch must
+        view, docs/decisions/0053-hold-along-surface-normal.md), which a touch must
         exceed."""
         recent = self._recent
         recent.append((t, *F_probe_B.tolist()))

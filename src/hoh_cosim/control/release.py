@@ -50,7 +50,7 @@ per packet: over one 8 ms tick that is 13-26 deadbands a second, the fall of a l
 packet inside its band by noise, the hand still pushing, the one-tick trend braked the robot 41
 times over the study's twenty hold-mode scans and 659 times over glide's twenty (its pushes are
 lighter), and the hold took each brake in contact for a let-go. Over eight packets the steps
-average out; a let-go's fall does not (docs/decisions.md, "The release detector in contact").
+average out; a let-go's fall does not (docs/decisions/0058-release-horizon-trend-40-ms.md).
 The gap keeps the one-tick trend: a packet k_gap bands below the estimate is itself the evidence,
 and a firm push's release is still decided at the first tick after its first packet.
 

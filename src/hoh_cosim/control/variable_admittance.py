@@ -21,15 +21,17 @@ term: δẋ = α η (δe + (k e₀ / ė_ref) δė) along the push, a zero at ė_
 (`hoh_cosim.study.linear.variable_law_lead`). A little of it is a phase lead that the hand-robot
 loop welcomes; much of it raises the gain at the loop's -180° crossover. On the default circles
 (e₀ about 10 with the tuned gains) k = 0.05 gives the gain margin 2.07 where k = 0 gives 1.90 and
-k = 0.2 gives 1.49 (`docs/decisions.md`): the default is k = 0.05, a light touch.
+k = 0.2 gives 1.49 (`docs/decisions/0038-variable-admittance-and-oscillation-watch.md`): the
+default is k = 0.05, a light touch.
 
 Stability against a stiff hand. A hand that grips hard and reacts late (a delayed stiffness of
 1000 N/m or more) makes the hand-robot loop oscillate at 1-3 Hz at the seed's slope, and no
 passivity controller on the robot sees it: the robot only yields to the hand, the hand's own delay
-drives the oscillation (`docs/decisions.md`). Dimeas and Aspragathos (IEEE Trans. Haptics 9(2),
-2016, "Online stability in human-robot cooperation with admittance control") detect the onset from
-the interaction's high-frequency content and raise the damping until it dies. Ours watches the
-tip's measured velocity (the controller has the TCP's positions):
+drives the oscillation (`docs/decisions/0038-variable-admittance-and-oscillation-watch.md`). Dimeas
+and Aspragathos (IEEE Trans. Haptics 9(2), 2016, "Online stability in human-robot cooperation with
+admittance control") detect the onset from the interaction's high-frequency content and raise the
+damping until it dies. Ours watches the tip's measured velocity (the controller has the TCP's
+positions):
 
     u      = highpass_fo(highpass_fo(v))                    (second order, f_o = 1 Hz: the
                                                               circles' 0.25 Hz pass at 6 %)

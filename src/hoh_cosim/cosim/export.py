@@ -255,7 +255,7 @@ def _readme(
         "it from the same tick (Gauss-Seidel); libcosim and ecos step them side by side and pass "
         "every output on after the step (Jacobi), which delays each connection by one step. The "
         "numbers then differ from hoh-cosim's by that delay alone; `hoh-cosim` reproduces either "
-        'coupling exactly (`docs/decisions.md` of the project, "Other engines").',
+        "coupling exactly (`docs/decisions/0023-external-engines-coupling.md` of the project).",
         "",
         "## What a host needs",
         "",

@@ -10,9 +10,9 @@ The scenario is translated into each engine's own terms, from the same FMUs our 
   element; the simulation is stepped at `dt_s`.
 
 Both engines couple their FMUs the Jacobi way, where our master is Gauss-Seidel in the file's order
-(see `docs/decisions.md`, "Other engines"): the FMUs due in a base step all step on the values
-exchanged before it, and their outputs are exchanged after it, so every connection delays by one
-step of its source. They differ for an FMU that steps every d > 1 base steps: libcosim
+(see `docs/decisions/0023-external-engines-coupling.md`): the FMUs due in a base step all step on
+the values exchanged before it, and their outputs are exchanged after it, so every connection delays
+by one step of its source. They differ for an FMU that steps every d > 1 base steps: libcosim
 (`fixed_step_algorithm::impl::do_step`) passes its outputs on when its step ends, d base steps after
 it began; ecos (`simulation::Impl::step`) exchanges every connection after every base step, so the
 outputs at the step's end reach the others one base step after it began. Our master reproduces

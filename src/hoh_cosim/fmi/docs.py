@@ -42,8 +42,10 @@ one block of `hoh_cosim` or `plant_models` through `hoh_cosim.fmi.slave.BlockSla
   sampled systems whose first step is their period, and refuse another;
 - fmi2GetFMUstate / fmi2SetFMUstate and their serialisation are supported.
 
-The FMUs run Python: the importing tool must load them in an environment where `hoh-cosim` is
-installed (the same Python that built them).
+The FMUs run Python and carry the project's code in `resources/`: the host needs Python 3.10 or
+newer with what each FMU's `resources/requirements.txt` names (numpy and scipy; numpy alone for the
+operator and the breathing, pinocchio too for the Panda), not hoh-cosim. A host that lacks one
+gets one line naming it and the `pip install` that fixes it.
 """
 
 

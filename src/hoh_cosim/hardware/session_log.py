@@ -32,15 +32,16 @@ first: its work, done under the interpreter's lock, delayed the 500 Hz loop by u
 second.) If the writer falls a whole ring behind, the rows it missed are reported as an event.
 `read_session` reads a complete file or one that was cut off.
 
-Size (a shift of 8 hours must fit; see docs/decisions.md for the measurements). Every number is
-written at a stated resolution (`RESOLUTION`, decimals), no finer than what produced it: the
-FT-150's wrench as its daemon sends it (forces to 0.01 N, torques to 0.001 N·m: exact), the FSE103's
-force as the float32 it is on the wire (its shortest decimal: exact), the robot's pose at 10 µm and
-1e-5 rad, which the loop itself works with (`at_log_resolution`), so a replay of the log feeds the
-blocks exactly what the session fed them; the hand's force to the FT-150's 0.01 N, commands to
-0.1 mm/s. A sensor's channel has a message when the sensor sent a new sample (its count moved),
-not every cycle: the cycle's sample is the latest message at or before it. Chunks are zstd-compressed; there is no
-per-message index (it alone was 130 MB an hour): readers find a time through the chunk index.
+Size (a shift of 8 hours must fit; see docs/decisions/0017-session-log.md for the measurements).
+Every number is written at a stated resolution (`RESOLUTION`, decimals), no finer than what produced
+it: the FT-150's wrench as its daemon sends it (forces to 0.01 N, torques to 0.001 N·m: exact), the
+FSE103's force as the float32 it is on the wire (its shortest decimal: exact), the robot's pose at
+10 µm and 1e-5 rad, which the loop itself works with (`at_log_resolution`), so a replay of the log
+feeds the blocks exactly what the session fed them; the hand's force to the FT-150's 0.01 N,
+commands to 0.1 mm/s. A sensor's channel has a message when the sensor sent a new sample (its count
+moved), not every cycle: the cycle's sample is the latest message at or before it. Chunks are
+zstd-compressed; there is no per-message index (it alone was 130 MB an hour): readers find a time
+through the chunk index.
 """
 
 from __future__ import annotations
@@ -169,10 +170,10 @@ RESOLUTION: dict[tuple[str, str], int | str] = {
 """Decimals each float field is written with (see the module's docstring); log times to 1 ns."""
 
 ZSTD_LEVEL = 17
-"""The chunks' zstd level, chosen by measurement (docs/decisions.md): level 3, the mcap writer's own,
-writes a third more than 9; 12 and 15 gain nothing over 9; 17 a tenth less than 9 for about 5 s of
-the writer's CPU per minute of session (a twelfth of a core, at nice 5 beside a real-time loop);
-19 a little less again for a fifth of a core."""
+"""The chunks' zstd level, chosen by measurement (docs/decisions/0017-session-log.md): level 3, the
+mcap writer's own, writes a third more than 9; 12 and 15 gain nothing over 9; 17 a tenth less than 9
+for about 5 s of the writer's CPU per minute of session (a twelfth of a core, at nice 5 beside a
+real-time loop); 19 a little less again for a fifth of a core."""
 
 T0_KEY = "t0_unix_ns"
 """The key of each channel's metadata that gives the log time of session time 0 [ns]."""

@@ -87,8 +87,9 @@ QUIET_CLUSTER: dict[str, Any] = {
 }
 """Dask settings of the local cluster that runs a study: its processes' own periodic work, which
 with Dask's defaults took about 9 % of this 2-core machine while two workers stepped (the workers'
-event loops, the nannies and the scheduler, measured per thread in `docs/decisions.md`), is made
-rare. Nothing a run computes depends on them; a cluster given by `--scheduler` keeps its own."""
+event loops, the nannies and the scheduler, measured per thread in
+`docs/decisions/0020-studies-on-dask.md`), is made rare. Nothing a run computes depends on them; a
+cluster given by `--scheduler` keeps its own."""
 
 
 @dataclass(frozen=True)

@@ -183,9 +183,10 @@ LAW_SETS: dict[str, tuple[str, ...]] = {
         "controller.translation.deadband=[0.45,0.45,0.25]",
     ),
 }
-"""The laws the report puts side by side: the seed's law with today's defaults, the issue-22
-pieces (filter without a peak, variable law, release braking, passivity controller) with the
-seed's gains, and with the gains tuned for effort at a 2.0 gain margin (`docs/decisions.md`)."""
+"""The laws the report puts side by side: the seed's law with today's defaults, the issue-22 pieces
+(filter without a peak, variable law, release braking, passivity controller) with the seed's gains,
+and with the gains tuned for effort at a 2.0 gain margin
+(`docs/decisions/0036-transparency-pieces-off-by-default.md`)."""
 
 POPULATION = ((300.0, 0.15), (1000.0, 0.15), (3000.0, 0.25))
 """[N/m], [s] Operators of the population the report runs each law set with (studies/population.yaml
