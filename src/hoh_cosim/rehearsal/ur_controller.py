@@ -25,7 +25,13 @@ the defaults, so a test gives each emulator its own loopback address, 127.0.0.x)
   1/f s, as `rtde_set_watchdog(..., "stop")` does), stop (255). Any other command halts the program
   with a text message: it is not emulated.
 - robot and safety state from the world's arm: TCP pose and speed, joint angles and speeds, the
-  TCP's external wrench, the world's clock as the timestamp, robot mode, safety mode and status bits, runtime state, robot status bits; `inject()` puts the robot in a
+  TCP's external wrench, robot mode, safety mode and status bits, runtime state, robot status
+  bits, and as the `timestamp` the controller's own clock: a whole number of its periods (2 ms on
+  an e-series, 8 ms on a CB3), from the world's time when the controller started. A controller
+  never skips a cycle: when this machine holds the emulator back, the cycles it missed are sent
+  late, each with its own timestamp (up to `BACKLOG_S` of them; a longer stall skips the rest,
+  and the clock still moves by whole periods), so lateness shows only as late delivery, as on a
+  controller whose client is slow; `inject()` puts the robot in a
   protective stop or an emergency stop, or drops the link (nothing passes either way, as with a
   pulled cable; after a while the controller closes the sockets and refuses new ones for as long).
 
@@ -54,11 +60,14 @@ import numpy as np
 from hoh_cosim.rehearsal import rtde_protocol as rtde
 from hoh_cosim.rehearsal.world import as_hardware, process_context
 
-__all__ = ["INJECTIONS", "STALL_EVENT_S", "UrController"]
+__all__ = ["BACKLOG_S", "INJECTIONS", "STALL_EVENT_S", "UrController"]
 
 STALL_EVENT_S = 0.02
 """A cycle of the controller's loop that starts this long [s] after the one before (ten e-series
 cycles) is an event of its log, "stalled N ms": the machine held the emulated controller back."""
+
+BACKLOG_S = 1.0
+"""[s] At most this much of the cycles a stall of this machine held back is sent late."""
 
 # what the dashboard server refuses in local control (UR's e-series replies)
 _CONTROL_COMMANDS = {"power", "brake", "load", "play", "stop", "pause", "unlock", "shutdown"}
@@ -283,6 +292,7 @@ class _Emulator:
         self.kicked = time.monotonic()
         self.refuse_until = 0.0
         self.cycles = 0
+        self.clock_s = 0.0  # [s] the controller's clock: the timestamp of the last cycle
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._listeners: dict[str, socket.socket] = {}
@@ -410,7 +420,7 @@ class _Emulator:
         running = self.runtime_state == PLAYING
         pose = list(p) + list(rotvec)  # the world publishes the orientation as UR reports it
         return {
-            "timestamp": float(flags[5]),  # the controller clock: the world time, which it drives
+            "timestamp": self.clock_s,  # the controller's own clock (`_control_loop`)
             "actual_TCP_pose": pose,
             "target_TCP_pose": pose,
             "actual_TCP_speed": list(twist),
@@ -524,18 +534,23 @@ class _Emulator:
 
     def _control_loop(self) -> None:
         period = 1.0 / self.rate_hz
-        next_t = last = time.perf_counter()
+        # the controller's clock counts whole periods, from the world's time at the start
+        first = math.floor(float(self.world._state.read(tries=3)[23]) / period)
+        start = last = time.perf_counter()
+        done = 0  # cycles run, or skipped by a stall longer than BACKLOG_S
+        backlog = max(1, round(BACKLOG_S * self.rate_hz))
         while not self._stop.is_set():
-            next_t += period
-            delay = next_t - time.perf_counter()
+            delay = start + done * period - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
-            else:
-                next_t = time.perf_counter()  # late: no burst of cycles to catch up
             started = time.perf_counter()
             if started - last > STALL_EVENT_S:  # the machine held the controller back: in its log
                 self._event(f"stalled {1e3 * (started - last):.0f} ms")
             last = started
+            due = int((started - start) / period) + 1  # cycles whose time has come
+            done = max(done, due - backlog)
+            cycles = range(done, due) if due > done else range(done, done + 1)
+            done = cycles[-1] + 1
             now = time.monotonic()
             with self.lock:
                 self._program_cycle(now)
@@ -543,8 +558,7 @@ class _Emulator:
                 state.update(self.registers_out)
                 state.update(self.echoed())
                 connections = list(self.connections)
-                self.cycles += 1
-                cycle = self.cycles
+                self.cycles = cycles[-1] + 1
                 outbox, self.outbox = self.outbox, []
             if now < self.silent_until:
                 continue
@@ -554,14 +568,19 @@ class _Emulator:
                 try:
                     for text, source, level in outbox:
                         conn.send(rtde.text_message(text, source, level, conn.version))
-                    if conn.outputs is not None and cycle % conn.every == 0:
-                        names, types, layout, _ = conn.outputs
-                        # a register nobody wrote reads 0, as on a controller; every other output
-                        # is in the state or was refused at set-up (NOT_EMULATED)
+                    if conn.outputs is None:
+                        continue
+                    names, types, layout, _ = conn.outputs
+                    recipe = 1 if conn.version == 2 else None
+                    for cycle in cycles:
+                        if (cycle + 1) % conn.every:
+                            continue
+                        # a register nobody wrote reads 0, as on a controller; every other
+                        # output is in the state or was refused at set-up (NOT_EMULATED)
+                        state["timestamp"] = self.clock_s = (first + cycle) * period
                         values = [
                             state.get(n, rtde.zero(t)) for n, t in zip(names, types, strict=True)
                         ]
-                        recipe = 1 if conn.version == 2 else None
                         conn.send(rtde.encode_values(recipe, layout, values))
                 except OSError:
                     self._forget(conn)
