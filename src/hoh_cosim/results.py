@@ -14,9 +14,14 @@ from pathlib import Path
 
 from hoh_cosim.errors import ConfigError
 
-__all__ = ["FORMATS", "check_out_dir", "check_writable", "replace_dir"]
+__all__ = ["FORMATS", "KIND_FILE", "check_out_dir", "check_writable", "replace_dir"]
 
 FORMATS = ("parquet", "csv")  # of a run's signals.*: compact and typed, or text for anything
+
+KIND_FILE = ".hoh-cosim-result"
+"""The file in every results directory that names what wrote it ("run", "clinical study", ...):
+the kinds share file names (summary.json, report.md, runs.csv), so a file alone cannot tell one
+kind's directory from another's, and a result must never replace another kind's."""
 
 
 def check_writable(directory: Path, option: str) -> None:
@@ -67,27 +72,42 @@ def _why_unwritable(base: Path, exc: OSError, itself: bool) -> str:
 
 def check_out_dir(out: Path, marker: str = "summary.json", what: str = "run") -> None:
     """Refuse, before anything runs, a destination that a result must not replace: one that is not
-    a directory, or a non-empty directory without `marker` (so not an earlier result)."""
+    a directory, a non-empty directory that another kind of result wrote (`KIND_FILE`), or, for
+    one written before results named their kind, a non-empty directory without `marker`."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
-        raise ConfigError(
-            f"--out {out}: exists, is not empty and holds no {marker}, so it is not a "
-            f"hoh-cosim {what} directory; choose another"
-        )
+    if out.is_dir() and any(out.iterdir()):
+        kind = _kind_of(out)
+        if kind is not None and kind != what:
+            raise ConfigError(
+                f"--out {out}: holds a hoh-cosim {kind}, not a {what}; choose another"
+            )
+        if kind is None and not (out / marker).is_file():
+            raise ConfigError(
+                f"--out {out}: exists, is not empty and holds no {marker}, so it is not a "
+                f"hoh-cosim {what} directory; choose another"
+            )
     check_writable(out.absolute().parent, f"--out {out}")
 
 
-def replace_dir(out: Path, fill: Callable[[Path], None]) -> None:
-    """Call `fill(staging)` on an empty directory beside `out`, then move it into place in one
-    rename: a failure leaves no half-written result, and an earlier one at `out` is replaced whole
-    (or put back if the move fails)."""
+def _kind_of(out: Path) -> str | None:
+    try:
+        return (out / KIND_FILE).read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+
+
+def replace_dir(out: Path, fill: Callable[[Path], None], what: str) -> None:
+    """Call `fill(staging)` on an empty directory beside `out`, name the result's kind `what` in
+    it (`KIND_FILE`), then move it into place in one rename: a failure leaves no half-written
+    result, and an earlier one at `out` is replaced whole (or put back if the move fails)."""
     out = out.absolute()
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     old: Path | None = None
     try:
         fill(staging)
+        (staging / KIND_FILE).write_text(what + "\n", encoding="utf-8")
         os.chmod(staging, 0o755)
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))

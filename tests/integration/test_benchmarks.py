@@ -54,3 +54,22 @@ def test_engines_prints_each_engines_realtime_factor_as_json():
     assert figures["components"] == 6
     for engine in ("fmu", "fmu_jacobi", "libcosim", "libcosim_recorded", "ecos", "ecos_recorded"):
         assert figures[f"{engine}_realtime_factor"] > 0
+
+
+def test_loaded_suite_runs_pytest_beside_its_hogs_and_prints_its_figures():
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(BENCHMARKS / "loaded_suite.py"),
+            *("--runs", "1", "--hogs", "1", "--"),
+            *("tests/unit/test_modes.py", "-n", "0"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert figures["hogs"] == 1
+    assert figures["green"] == 1
+    assert "passed" in result.stdout.splitlines()[1]

@@ -793,7 +793,7 @@ def _replay(args: argparse.Namespace) -> int:
         (staging / "replay.png").write_bytes(png)
         (staging / "replay.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="replay")
     if not result.session.complete:
         print(
             f"note: {args.log} ends early (the session was cut off); replayed what is there",

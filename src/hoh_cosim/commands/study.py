@@ -263,7 +263,7 @@ def _sweep(args: argparse.Namespace) -> int:
             json.dumps(jsonable(info), indent=2, allow_nan=False) + "\n", encoding="utf-8"
         )
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="sweep")
     print(
         f"{sweep.name}: {len(outcomes)} runs, {len(failed)} failed, {info['wall_s']:.1f} s "
         f"({info['scheduler']})"

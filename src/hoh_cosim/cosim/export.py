@@ -427,7 +427,7 @@ def export_scenario(
         }
         (staging / "export.json").write_text(json.dumps(manifest, indent=2) + "\n")
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="export")
     return ExportResult(
         out,
         out / ssp_name,

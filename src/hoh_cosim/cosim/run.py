@@ -184,7 +184,7 @@ def write_results(
             json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8"
         )
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="run")
 
 
 def run_scenario(

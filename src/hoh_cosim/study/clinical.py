@@ -565,7 +565,7 @@ def run_clinical(
     scenarios = Path(scenarios)
     n = operators if operators is not None else (QUICK_OPERATORS if quick else FULL_OPERATORS)
     _check_options(n, seed, scheduler, workers)
-    check_out_dir(out, marker="summary.json", what="clinical study")
+    check_out_dir(out, marker="operators.csv", what="clinical study")
     if figures_out is not None:
         check_writable(Path(figures_out).parent, "--figures")
     modes = study_modes(presets or STUDY_PRESETS, overrides)
@@ -617,7 +617,7 @@ def run_clinical(
         )
         (staging / "report.md").write_text(page_markdown(title, line, sections), encoding="utf-8")
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="clinical study")
     if figures_out is not None:
         write_preset_figures(Path(figures_out), summary)
     return ClinicalResult(out, summary, outcomes, sections)
@@ -787,6 +787,7 @@ def _summary(
         "operators": n,
         "seed": seed,
         "runs": len(got) + len(released),
+        "release_runs": len(released),
         "failed_runs": failed,
         "tasks_defined": {name: t.label for name, t in TASKS.items()},
         "task_s": {name: t.duration(quick) for name, t in TASKS.items()},
@@ -1376,9 +1377,11 @@ def _sections(
 
 def _header(summary: Mapping[str, Any]) -> tuple[str, str]:
     kind = "quick" if summary["quick"] else "full"
+    released = summary.get("release_runs", 0)
     line = (
         f"{summary['operators']} operators x {len(TASKS)} tasks x {len(summary['modes'])} modes = "
-        f"{summary['runs']} runs ({kind}, seed {summary['seed']}), {summary['wall_s']:.0f} s"
+        f"{summary['runs'] - released} runs and {released} of {RELEASE_SCENARIO} "
+        f"({kind}, seed {summary['seed']}), {summary['wall_s']:.0f} s"
     )
     if summary.get("overrides"):
         line += "; every assisted mode with " + " ".join(

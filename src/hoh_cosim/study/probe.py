@@ -280,7 +280,7 @@ def run_probe_correction(
         )
         (staging / "report.md").write_text(_markdown(summary, figures), encoding="utf-8")
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="probe-correction")
     return ProbeStudy(out, summary, table, contact)
 
 

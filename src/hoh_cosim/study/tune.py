@@ -400,5 +400,5 @@ def run_tune(
             json.dumps(jsonable(result), indent=2, allow_nan=False) + "\n", encoding="utf-8"
         )
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="tuning")
     return result

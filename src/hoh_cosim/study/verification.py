@@ -456,7 +456,7 @@ def build_report(
             page_markdown(*_header(summary), sections), encoding="utf-8"
         )
 
-    replace_dir(out, fill)
+    replace_dir(out, fill, what="report")
     return ReportResult(out, sections, summary, outcomes)
 
 
