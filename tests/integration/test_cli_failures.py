@@ -161,3 +161,25 @@ def test_the_summary_says_each_thing_once(tmp_path):
     assert "realtime_factor" not in summary
     assert summary["metrics"]["wall_s"] > 0
     assert summary["metrics"]["realtime_factor"] > 0
+
+
+@pytest.mark.parametrize("where", ["hw rehearse", "hw run"])
+def test_a_session_log_that_exists_is_refused_before_anything_runs(tmp_path, where):
+    log = tmp_path / "session.mcap"
+    log.write_bytes(b"an earlier session")
+    if where == "hw rehearse":
+        argv = ["hw", "rehearse", "--seconds", "2", "--log", str(log)]
+    else:
+        rig = tmp_path / "rig.yaml"
+        rig.write_text(
+            "robot:\n  host: 127.0.0.1\nprobe: null\ncalibration: calibration.json\n",
+            encoding="utf-8",
+        )
+        argv = ["hw", "run", str(rig), "--log", str(log)]
+    done = subprocess.run(_hoh(*argv), capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        f"hoh-cosim: --log: {log} exists; a session log is never overwritten"
+    ]
+    assert "starting" not in done.stdout  # nothing ran
+    assert log.read_bytes() == b"an earlier session"

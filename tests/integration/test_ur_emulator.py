@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import signal
 import socket
 import struct
@@ -446,6 +447,24 @@ def test_hw_emulate_refuses_a_host_off_loopback_unless_allowed():
 
 
 # --- RTDE as UR's guide describes it, through a client written from the guide ------------------
+
+
+def test_hw_run_with_no_controller_at_the_address_ends_in_one_line_and_a_whole_log(tmp_path):
+    setup = WorldSetup(robot_rate_hz=500.0, task="circle", task_start_s=7.0)
+    with RehearsalWorld(setup) as world:
+        config = write_config(tmp_path, world, next_host())  # nothing listens there
+        log = tmp_path / "session.mcap"
+        process = hw_run(config, log, "--seconds", "3")
+        output = finished(process, log, 120)
+    assert process.returncode == 1, output
+    assert "Traceback" not in output, output
+    assert re.search(
+        r"^session ended: UR controller at [\d.]+ \(RTDE\): cannot connect", output, re.M
+    )
+    session = read_session(log)
+    assert session.complete
+    ends = [m for m in session.messages["/events"] if m["event"] == "end"]
+    assert [m["t"] for m in ends] == [0.0], session.messages["/events"]
 
 
 @pytest.fixture

@@ -477,14 +477,22 @@ def _hw_run(args: argparse.Namespace) -> int:
     from hoh_cosim.hardware.isolation import in_child
 
     config = load_config(args.config, args.overrides, args.preset)
+    log_path = Path(args.log) if args.log else config.log_dir / f"session-{_stamp()}.mcap"
+    _check_log(log_path, "--log" if args.log else f"{config.path}: log_dir")
     if config.calibration is None:
         raise ConfigError(f"{config.path}: calibration: missing (run 'hoh-cosim hw calibrate')")
     calibration = read_calibration(config.calibration)
-    log_path = Path(args.log) if args.log else config.log_dir / f"session-{_stamp()}.mcap"
-    check_writable(log_path.parent, "--log" if args.log else f"{config.path}: log_dir")
     if config.ft150.zero_on_start:
         zero_sensor(config.ft150.host)
     return in_child(lambda: _session(config, calibration, log_path, args.seconds))
+
+
+def _check_log(log_path: Path, option: str) -> None:
+    """Refuse, before anything runs, a session log that could not be written: a folder where
+    nothing can be made, or a file that is there already (a log is never overwritten)."""
+    check_writable(log_path.parent, option)
+    if os.path.lexists(log_path):
+        raise ConfigError(f"{option}: {log_path} exists; a session log is never overwritten")
 
 
 def _session(config: Any, calibration: Any, log_path: Path, seconds: float | None) -> int:
@@ -562,7 +570,7 @@ def _calibration(config: Any, params: Any, samples: int, out: Path) -> int:
     cal = run.calibration
     print(
         f"mass {cal.mass_kg:.5f} ± {cal.mass_se_kg:.5f} kg, centre of mass "
-        f"{[round(x, 5) for x in cal.com_m]} m, from {cal.n_poses} poses"
+        f"{[round(float(x), 5) for x in cal.com_m]} m, from {cal.n_poses} poses"
     )
     print("residual RMS before " + " ".join(f"{v:.4f}" for v in residuals["rms_before"]))
     print("residual RMS after  " + " ".join(f"{v:.4f}" for v in residuals["rms_after"]))
@@ -613,7 +621,7 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     if not args.seconds > 0:
         raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")
     log_path = Path(args.log) if args.log else Path("sessions") / f"rehearsal-{_stamp()}.mcap"
-    check_writable(log_path.parent, "--log")
+    _check_log(log_path, "--log")
     phantom = 0.03 if args.task in CONTACT_TASKS else None
     if args.breathing and phantom is None:
         raise ConfigError(

@@ -589,7 +589,10 @@ class Runner:
 
     def _event(self, event: str, detail: str) -> None:
         if self.log is not None:
-            self.log.event(self._k, self._k * self.robot.period_s, event, detail)
+            # before the robot told its period (it could not be reached), at the session's start
+            period = self.robot.period_s
+            t = self._k * period if math.isfinite(period) else 0.0
+            self.log.event(self._k, t, event, detail)
 
     def _log_parameters(
         self, estimator: Estimator, controller: HandGuidingController, rebias: Rebias
