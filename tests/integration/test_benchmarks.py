@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 
 
@@ -73,3 +75,22 @@ def test_loaded_suite_runs_pytest_beside_its_hogs_and_prints_its_figures():
     assert figures["hogs"] == 1
     assert figures["green"] == 1
     assert "passed" in result.stdout.splitlines()[1]
+
+
+def test_view_cost_prints_both_arms_and_their_ratio_as_json():
+    pytest.importorskip("rerun", reason="the view needs rerun-sdk (the view or test extra)")
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(BENCHMARKS / "view_cost.py"),
+            *("--cycles", "300", "--rounds", "1", "--no-live", "--rt-priority", "0"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert figures["view_on"]["cycles"] == figures["view_off"]["cycles"] == 100
+    assert figures["ratio_p99"] > 0
+    assert figures["rows_shown"] == figures["rows_handed_to_view"] > 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import importlib.util
 import io
 import json
 import re
@@ -35,6 +36,7 @@ OPERATORS = 2
 SET = "controller.hold.swing_s=0.1"
 SCANNING = ("view", "scan", "press")  # the tasks without the patient moving away
 LETS_GO = ("hold", "clinical")  # the presets that hold the contact: their hands let go
+HAVE_RERUN = importlib.util.find_spec("rerun") is not None  # the view (or test) extra
 
 
 @pytest.fixture(scope="module")
@@ -62,6 +64,7 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
                 SET,
                 "--figures",
                 str(out.parent / "figures.json"),
+                *(["--record-view"] if HAVE_RERUN else []),
             ]
         )
     (out.parent / "said.txt").write_text(said.getvalue())  # what the command printed
@@ -131,6 +134,34 @@ def test_every_operator_does_every_task_in_every_mode(study) -> None:
             assert r["task_time_s"] != "", (r["task"], r["mode"])
     with (out / "operators.csv").open() as f:
         assert len(list(csv.DictReader(f))) == OPERATORS
+
+
+@pytest.mark.skipif(not HAVE_RERUN, reason="the views need rerun-sdk (the view or test extra)")
+def test_record_view_keeps_one_recording_of_each_kept_run_with_the_arm_and_the_run_s_time(
+    study,
+) -> None:
+    """`--record-view`: one recording per operator (the first three), task and mode in `views/`,
+    each read back by Rerun's reader with the arm drawn over the run's whole time."""
+    from rerun.chunk import RrdReader
+
+    _, out = study
+    views = out / "views"
+    assert {p.name for p in views.iterdir()} == {
+        f"operator-{i + 1:02d}-{task}-{mode}.rrd"
+        for i in range(min(OPERATORS, 3))
+        for task in TASKS
+        for mode in MODES
+    }
+    times: dict[str, list[float]] = {}
+    for chunk in RrdReader(views / "operator-02-press-clinical.rrd").stream():
+        if chunk.is_static or "sim_time" not in chunk.timeline_names:
+            continue
+        column = chunk.to_record_batch().column("sim_time").cast("int64").to_pylist()
+        times.setdefault(chunk.entity_path, []).extend(t * 1e-9 for t in column)
+    arm = [path for path in times if path.startswith("/world/arm/link")]
+    assert len(arm) == 6, sorted(times)
+    assert min(times[arm[-1]]) < 0.1
+    assert max(times[arm[-1]]) > TASKS["press"].quick_task_s - 0.1
 
 
 def test_modes_that_run_the_same_are_run_once_and_reported_under_each(study, tmp_path) -> None:

@@ -11,7 +11,13 @@ Each family module has `add_commands(sub)` (its subcommands on the main parser) 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
+import time
+from collections.abc import Callable
 from typing import Any
+
+from hoh_cosim.errors import ConfigError
 
 __all__ = [
     "EXIT_BAD_INPUT",
@@ -20,6 +26,9 @@ __all__ = [
     "ArgumentParser",
     "HelpFormatter",
     "add_set_option",
+    "add_view_options",
+    "check_view_options",
+    "linger",
 ]
 
 EXIT_OK = 0
@@ -64,3 +73,69 @@ def add_set_option(parser: argparse.ArgumentParser, help: str, metavar: str = "C
     parser.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar=metavar, help=help
     )
+
+
+def add_view_options(parser: argparse.ArgumentParser, what: str, live: bool = True) -> None:
+    """--view, --record-view FILE.rrd and --view-port: the 3D view of `what` (hoh_cosim.view),
+    `live` as it runs."""
+    shown = "live, as it runs," if live else "once replayed"
+    parser.add_argument(
+        "--view",
+        action="store_true",
+        help=f"show {what} {shown} in a 3D view in the browser (Rerun's web viewer served from "
+        "this machine; its address is printed), served until Ctrl-C; needs the view extra "
+        "(default: no view)",
+    )
+    parser.add_argument(
+        "--record-view",
+        metavar="FILE.rrd",
+        help=f"keep the view of {what} as a Rerun recording, written whole at the end; open it "
+        "later with 'python -m hoh_cosim.view serve FILE.rrd' or Rerun's 'rerun FILE.rrd' "
+        "(default: none)",
+    )
+    parser.add_argument(
+        "--view-port",
+        type=int,
+        default=9090,
+        metavar="PORT",
+        help="the web viewer's port for --view (default: 9090)",
+    )
+
+
+def check_view_options(args: argparse.Namespace) -> bool:
+    """Whether a view is asked for; refused with one line, before anything runs, without Rerun,
+    with a port out of range or a recording that cannot be written."""
+    if not (args.view or args.record_view):
+        return False
+    from hoh_cosim.view import require_rerun
+
+    require_rerun("--view" if args.view else "--record-view")
+    if args.view and not 1 <= args.view_port <= 65535:
+        raise ConfigError(f"--view-port: expected a port 1 to 65535, got {args.view_port}")
+    if args.record_view:
+        from hoh_cosim.view.stream import check_record_path
+
+        check_record_path(args.record_view)
+    return True
+
+
+def linger(url: str | None, close: Callable[[], None]) -> None:
+    """Keep a live view (at `url`; None: none) served until Ctrl-C (or SIGTERM, from a script
+    that started it), then `close` it."""
+    previous = None
+    try:
+        if url is None:
+            return
+        with contextlib.suppress(KeyboardInterrupt):
+            previous = signal.signal(signal.SIGTERM, _interrupted)  # before a script reads on
+            print(f"view: still served at {url} (Ctrl-C ends)", flush=True)
+            while True:
+                time.sleep(0.5)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+        close()
+
+
+def _interrupted(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt

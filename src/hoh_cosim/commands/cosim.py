@@ -3,6 +3,7 @@
 hoh-cosim [run] SCENARIO.yaml [--out DIR] [--engine fmu|inprocess|libcosim|ecos] [--duration S]
                               [--coupling gauss-seidel|jacobi|jacobi-eager] [--seed N]
                               [--preset NAME|FILE] [--set component.parameter=value ...]
+                              [--view] [--record-view FILE.rrd] [--view-port PORT]
 hoh-cosim build-fmus [--out DIR]
 hoh-cosim export SCENARIO.yaml --out DIR [--check] [--duration S] [--seed N] [--preset NAME|FILE] [--set ...]
 hoh-cosim presets [NAME|FILE] [--json]
@@ -21,7 +22,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from hoh_cosim.commands import ArgumentParser, add_set_option
+from hoh_cosim.commands import (
+    ArgumentParser,
+    add_set_option,
+    add_view_options,
+    check_view_options,
+    linger,
+)
 from hoh_cosim.cosim import COUPLINGS, ENGINE_COUPLING, ENGINES, EXTERNAL_ENGINES
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.results import FORMATS
@@ -252,6 +259,7 @@ def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--quiet", action="store_true", help="no progress bar and no metric table (default: both)"
     )
+    add_view_options(parser, "the run")
 
 
 def _metric_text(value: object) -> str:
@@ -269,6 +277,23 @@ def run_scenario_command(argv: Sequence[str], others: Sequence[str]) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from hoh_cosim.cosim.run import run_scenario
+
+    views: list[Any] = []
+    watch = None
+    if check_view_options(args):
+
+        def watch(scenario: Any) -> Any:
+            from hoh_cosim.view.cosim import CosimView
+
+            view = CosimView(
+                scenario,
+                web_port=args.view_port if args.view else None,
+                record=args.record_view,
+            )
+            views.append(view)
+            if view.url is not None:
+                print(f"view: {view.url}", flush=True)
+            return view
 
     if args.engine in EXTERNAL_ENGINES and args.coupling != "gauss-seidel":
         raise ConfigError(
@@ -290,6 +315,7 @@ def _run(args: argparse.Namespace) -> int:
         fmt=args.format,
         preset=args.preset,
         fmi=args.fmi,
+        watch=watch,
     )
     for note in result.report.notes:
         print(f"hoh-cosim: note: {note}", file=sys.stderr)
@@ -306,6 +332,10 @@ def _run(args: argparse.Namespace) -> int:
             if key not in ("wall_s", "realtime_factor"):
                 print(f"  {key:<{width}}  {_metric_text(value)}")
     print(f"wrote {result.out}")
+    if args.record_view:
+        print(f"wrote {args.record_view}")
+    if views:
+        linger(views[0].url, views[0].close)
     return 0
 
 

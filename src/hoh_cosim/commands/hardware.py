@@ -2,13 +2,16 @@
 
     hoh-cosim hw run CONFIG.yaml [--seconds S] [--log FILE] [--preset NAME|FILE]
                                  [--set block.parameter=value ...]
+                                 [--view] [--record-view FILE.rrd] [--view-port PORT]
     hoh-cosim hw calibrate CONFIG.yaml [--out FILE] [--samples N] [--tilts N] [--directions N]
     hoh-cosim hw sensors [--ft HOST[:PORT]] [--probe DEVICE] [--seconds S] [--json]
     hoh-cosim hw rehearse [--seconds S] [--task TASK] [--rate HZ] [--fault KIND@SECONDS ...]
                           [--breathing MM] [--let-go S+D] [--away MM@S[/D]] [--preset NAME|FILE]
+                          [--view] [--record-view FILE.rrd] [--view-port PORT]
     hoh-cosim hw emulate [--host 127.0.0.1] [--series e|cb3] [--seconds N] [--allow-remote]
     hoh-cosim hw campaign [--runs N] [--seed S] [--workers W] [--out DIR] [--kinds K,K,...]
     hoh-cosim replay LOG.mcap [--preset NAME|FILE] [--set block.parameter=value ...] [--out DIR]
+                              [--view] [--record-view FILE.rrd] [--view-port PORT]
 
 Exit status as everywhere: 0 done, 2 the input is wrong, 1 the session ended on a fault.
 """
@@ -25,7 +28,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hoh_cosim.commands import add_set_option
+from hoh_cosim.commands import add_set_option, add_view_options, check_view_options, linger
 from hoh_cosim.errors import ConfigError, RunError, io_failure
 from hoh_cosim.rehearsal.faults import CAMPAIGN_KINDS, FAULTS, Fault
 from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
@@ -173,6 +176,7 @@ def add_commands(sub: Any) -> None:
     )
     _add_preset(run, "the config's preset, else " + _default_preset())
     _add_block_overrides(run)
+    add_view_options(run, "the session")
 
     cal = hw_sub.add_parser(
         "calibrate",
@@ -326,6 +330,7 @@ def add_commands(sub: Any) -> None:
         ),
     )
     _add_rt_priority(rehearse, "the loop")
+    add_view_options(rehearse, "the session")
     _add_preset(rehearse, _default_preset())
     rehearse.add_argument(
         "--set",
@@ -447,6 +452,7 @@ def add_commands(sub: Any) -> None:
     rep.add_argument(
         "--out", metavar="DIR", help="the results directory (default: runs/replay-<log name>)"
     )
+    add_view_options(rep, "the session with the logged and the recomputed commands", live=False)
 
 
 def _default_preset() -> str:
@@ -482,9 +488,40 @@ def _hw_run(args: argparse.Namespace) -> int:
     if config.calibration is None:
         raise ConfigError(f"{config.path}: calibration: missing (run 'hoh-cosim hw calibrate')")
     calibration = read_calibration(config.calibration)
+    view = args if check_view_options(args) else None
     if config.ft150.zero_on_start:
         zero_sensor(config.ft150.host)
-    return in_child(lambda: _session(config, calibration, log_path, args.seconds))
+    return in_child(lambda: _session(config, calibration, log_path, args.seconds, view))
+
+
+def _start_view(
+    args: argparse.Namespace, controller: Any, phantom_below_m: float | None, title: str
+) -> tuple[Any, str | None]:
+    """The session's view, started before the session (a port in use: one line, exit 2)."""
+    from hoh_cosim.view.session import session_scene, start_session_view
+
+    feed, url = start_session_view(
+        session_scene(controller, phantom_below_m),
+        web_port=args.view_port if args.view else None,
+        record=args.record_view,
+        title=title,
+    )
+    if url is not None:
+        print(f"view: {url}", flush=True)
+    return feed, url
+
+
+def _end_view(feed: Any, url: str | None, record: str | None) -> None:
+    """The session's view after the session: the recording finished, a live view served until
+    Ctrl-C. A view that fails says so; the session's status stands."""
+    try:
+        feed.finish()
+    except RunError as exc:
+        print(f"hoh-cosim: the view: {exc}", file=sys.stderr)
+    else:
+        if record:
+            print(f"wrote {record}")
+    linger(url, feed.close)
 
 
 def _check_log(log_path: Path, option: str) -> None:
@@ -495,7 +532,13 @@ def _check_log(log_path: Path, option: str) -> None:
         raise ConfigError(f"{option}: {log_path} exists; a session log is never overwritten")
 
 
-def _session(config: Any, calibration: Any, log_path: Path, seconds: float | None) -> int:
+def _session(
+    config: Any,
+    calibration: Any,
+    log_path: Path,
+    seconds: float | None,
+    view: argparse.Namespace | None = None,
+) -> int:
     """`hw run`'s session, in the child process of `in_child`."""
     from hoh_cosim.hardware.fse103 import FSE103Port
     from hoh_cosim.hardware.ft150 import FT150Stream
@@ -524,9 +567,22 @@ def _session(config: Any, calibration: Any, log_path: Path, seconds: float | Non
         "R_TS": config.robot.R_TS.tolist(),
         "calibration": str(config.calibration),
     }
-    log = SessionLog(log_path, metadata).start()
-    runner = Runner(config, robot, ft, probe, calibration, log, announce=_announce)
-    return _report(runner.run(seconds), log_path)
+    feed, url = (None, None)
+    if view is not None:
+        feed, url = _start_view(view, config.controller, None, f"session {log_path.stem}")
+    try:
+        log = SessionLog(log_path, metadata).start()
+        runner = Runner(
+            config, robot, ft, probe, calibration, log, announce=_announce, observer=feed
+        )
+        status = _report(runner.run(seconds), log_path)
+    except BaseException:
+        if feed is not None:
+            feed.close()
+        raise
+    if feed is not None:
+        _end_view(feed, url, view.record_view if view is not None else None)
+    return status
 
 
 def _hw_calibrate(args: argparse.Namespace) -> int:
@@ -620,6 +676,7 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
 
     if not args.seconds > 0:
         raise ConfigError(f"--seconds: expected a number > 0, got {args.seconds}")
+    viewing = check_view_options(args)
     log_path = Path(args.log) if args.log else Path("sessions") / f"rehearsal-{_stamp()}.mcap"
     _check_log(log_path, "--log")
     phantom = 0.03 if args.task in CONTACT_TASKS else None
@@ -661,9 +718,20 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         controller=controller,
         preset=preset,
     )
-    result = rehearse(setup, announce=_announce)
+    feed, url = (None, None)
+    if viewing:
+        feed, url = _start_view(args, controller, phantom, f"rehearsal {log_path.stem}")
+    try:
+        result = rehearse(setup, announce=_announce, observer=feed)
+    except BaseException:
+        if feed is not None:
+            feed.close()
+        raise
     print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
-    return _report(result.session, log_path)
+    status = _report(result.session, log_path)
+    if feed is not None:
+        _end_view(feed, url, args.record_view)
+    return status
 
 
 def _hw_campaign(args: argparse.Namespace) -> int:
@@ -791,9 +859,11 @@ def _hw_emulate(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from hoh_cosim.hardware.replay import plot_replay, replay
 
+    viewing = check_view_options(args)
     out = Path(args.out) if args.out else Path("runs") / f"replay-{Path(args.log).stem}"
     check_out_dir(out, marker="replay.json", what="replay")
     result = replay(args.log, args.overrides, args.preset)
+    view = _replay_view(args, result) if viewing else None
     summary = result.summary()
     png = plot_replay(result)
 
@@ -810,7 +880,37 @@ def _replay(args: argparse.Namespace) -> int:
     for key, value in summary.items():
         print(f"  {key:<28} {value:.6g}" if isinstance(value, float) else f"  {key:<28} {value}")
     print(f"wrote {out}")
+    if view is not None:
+        if args.record_view:
+            print(f"wrote {args.record_view}")
+        linger(view.url, view.close)
     return 0
+
+
+def _replay_view(args: argparse.Namespace, result: Any) -> Any:
+    """The replayed session in the view: shown (and recorded) whole before the results are
+    written; a live view is served until Ctrl-C after them."""
+    from hoh_cosim.view.session import TIMELINE, log_replay, session_scene
+    from hoh_cosim.view.stream import ViewStream
+
+    world = result.session.metadata.get("world") or {}
+    stream = ViewStream(
+        session_scene(result.controller, world.get("phantom_below_m")),
+        title=f"replay {Path(args.log).stem}",
+        timeline=TIMELINE,
+        web_port=args.view_port if args.view else None,
+        record=args.record_view,
+        replay=True,
+    )
+    if stream.url is not None:
+        print(f"view: {stream.url}", flush=True)
+    try:
+        log_replay(result, stream)
+        stream.finish()
+    except BaseException:
+        stream.abandon()
+        raise
+    return stream
 
 
 def run_command(args: argparse.Namespace) -> int | None:

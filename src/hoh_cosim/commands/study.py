@@ -6,7 +6,7 @@
     hoh-cosim probe-correction [--out DIR] [--seed S] [--engine E] [--workers N] [--quick]
     hoh-cosim study clinical [--quick] [--operators N] [--seed S] [--preset NAME ...] [--figures F]
                              [--workers W] [--scheduler ADDR]
-                             [--out DIR] [--set C.P=V ...]
+                             [--out DIR] [--set C.P=V ...] [--record-view]
 
 `--workers 0` runs everything serially in this process (no Dask).
 """
@@ -211,6 +211,13 @@ def add_commands(sub) -> None:
         "set a parameter in every assisted mode's runs, after the mode's preset, e.g. "
         "controller.translation.slope=[0.04,0.04,0.04] (repeatable; freehand as it is; default: "
         "none)",
+    )
+    clinical.add_argument(
+        "--record-view",
+        action="store_true",
+        help="also keep one Rerun recording of the 3D view per kept run (the first three "
+        "operators' runs) in DIR/views/, to open with 'python -m hoh_cosim.view serve FILE.rrd'; "
+        "needs the view extra (default: none)",
     )
     clinical.add_argument(
         "--figures",
@@ -425,6 +432,7 @@ def _clinical(args: argparse.Namespace) -> int:
         overrides=args.overrides,
         presets=args.presets or None,
         figures_out=args.figures,
+        record_views=args.record_view,
     )
     s = result.summary
     print(

@@ -417,11 +417,15 @@ def simulate(
     *,
     fmu_paths: dict[str, Path] | None = None,
     progress: bool = True,
-    observer: Callable[[int, float], None] | None = None,
+    observer: Callable[[int, float, np.ndarray], None] | None = None,
     coupling: str = "gauss-seidel",
     fmi: int = 2,
 ) -> Recording:
     """Run `scenario` with `engine` and record every output.
+
+    `observer(k, t, outputs)` is called after every tick k of our master (from t to t + dt) with
+    the row the recording keeps for t + dt: every output of every component, in the layout of
+    `recording_layout` (a view of the recording: read it, copy what is kept).
 
     "fmu" and "inprocess" are our master, with `coupling` "gauss-seidel" (the file's order, the
     default), "jacobi" or "jacobi-eager" (libcosim's and ecos's); "libcosim" and "ecos" run the
@@ -471,7 +475,7 @@ def _run(
     engine: str,
     runtimes: list[Runtime],
     progress: bool,
-    observer: Callable[[int, float], None] | None,
+    observer: Callable[[int, float, np.ndarray], None] | None,
     coupling: str,
 ) -> Recording:
     # one array for every output, then the constant input values
@@ -588,7 +592,7 @@ def _run(
             else:
                 values[k + 1] = outputs
             if observer is not None:
-                observer(k, t)
+                observer(k, t, values[k + 1])
             if k % 1000 == 0:
                 bar.update(t)
     except RunError:

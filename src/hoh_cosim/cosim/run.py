@@ -20,14 +20,15 @@ import enum
 import io
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from hoh_cosim import __version__
+from hoh_cosim.cosim import EXTERNAL_ENGINES
 from hoh_cosim.cosim.engines import simulate
 from hoh_cosim.cosim.recording import Recording
 from hoh_cosim.cosim.report import Report, compute_report
@@ -37,6 +38,7 @@ from hoh_cosim.results import FORMATS, check_out_dir, replace_dir
 
 __all__ = [
     "RunResult",
+    "RunWatch",
     "jsonable",
     "run_scenario",
     "signal_columns",
@@ -53,6 +55,18 @@ class RunResult:
     report: Report
     out: Path
     summary: dict[str, Any]
+
+
+class RunWatch(Protocol):
+    """Something that watches a run as it goes (the view, `hoh_cosim.view.cosim`): made once the
+    scenario is loaded and before anything runs (so that it can refuse with one line), told of
+    every tick of our master (`engines.simulate`'s observer; never for an external engine, which
+    steps on its own), then given the whole recording once the results are written, or told that
+    the run failed."""
+
+    def tick(self, k: int, t: float, outputs: np.ndarray) -> None: ...
+    def done(self, rec: Recording) -> None: ...
+    def abandon(self) -> None: ...
 
 
 def jsonable(value: Any) -> Any:
@@ -201,23 +215,39 @@ def run_scenario(
     fmt: str = "parquet",
     preset: str | None = None,
     fmi: int = 2,
+    watch: Callable[[Scenario], RunWatch] | None = None,
 ) -> RunResult:
     """Load, run, measure and write one scenario; `out` defaults to runs/<scenario name>, the
     signals as `fmt` ("parquet" or "csv"), `preset` the estimator's and the controller's
     (`hoh_cosim.presets`; default: the scenario's), `fmi` the FMI version of the fmu engine's
-    FMUs."""
+    FMUs, `watch` what watches the run (`RunWatch`, made from the loaded scenario)."""
     if fmt not in FORMATS:
         raise ConfigError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
     scenario = load_scenario(path, overrides, duration_s, seed, preset)
     out_dir = Path(out) if out is not None else Path("runs") / scenario.name
     check_out_dir(out_dir)
-    rec = simulate(scenario, engine, progress=progress, coupling=coupling, fmi=fmi)
-    report = compute_report(scenario, rec)
-    summary = summary_of(scenario, rec, report, overrides)
-    images: dict[str, bytes] = {}
-    if plots:
-        from hoh_cosim.cosim.plots import render_plots
+    watcher = watch(scenario) if watch is not None else None
+    try:
+        rec = simulate(
+            scenario,
+            engine,
+            progress=progress,
+            coupling=coupling,
+            fmi=fmi,
+            observer=None if watcher is None or engine in EXTERNAL_ENGINES else watcher.tick,
+        )
+        report = compute_report(scenario, rec)
+        summary = summary_of(scenario, rec, report, overrides)
+        images: dict[str, bytes] = {}
+        if plots:
+            from hoh_cosim.cosim.plots import render_plots
 
-        images = render_plots(scenario, rec, report)
-    write_results(out_dir, scenario, rec, report, summary, images, fmt)
+            images = render_plots(scenario, rec, report)
+        write_results(out_dir, scenario, rec, report, summary, images, fmt)
+        if watcher is not None:
+            watcher.done(rec)
+    except BaseException:
+        if watcher is not None:
+            watcher.abandon()
+        raise
     return RunResult(scenario, rec, report, out_dir, summary)

@@ -42,6 +42,7 @@ class ReplayResult:
     new: dict[str, np.ndarray]  # replayed
     estimator: EstimatorParams
     controller: ControllerParams
+    cycles: np.ndarray | None = None  # the cycle number k of each row
 
     def summary(self) -> dict[str, Any]:
         dv = self.new["twist_B"][:, :3] - self.old["twist_B"][:, :3]
@@ -197,6 +198,7 @@ def replay(
         {k: np.array(v) for k, v in new.items()},
         params["estimator"],
         params["controller"],
+        np.array(cycles),
     )
 
 

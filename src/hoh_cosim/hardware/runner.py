@@ -10,11 +10,13 @@
         Estimator.step (predicts every cycle, corrects when a sample's counter moved)
         HandGuidingController.step
         the supervisor: anything wrong -> stop the robot and end with the cause
-        speedL, kick the watchdog, log the cycle
+        speedL, kick the watchdog, log the cycle, offer it to the observer (if any)
     finally: stop the robot, stop the streams, close the log
 
-The loop never blocks on I/O: reader threads fill mailboxes, a writer process writes the log. Time
-inside the blocks is the cycle number times the period, as in the co-simulation.
+The loop never blocks on I/O: reader threads fill mailboxes, a writer process writes the log, and
+an observer (the live view's feed, `hoh_cosim.hardware.feed`) is a bounded ring that drops frames
+rather than wait. Time inside the blocks is the cycle number times the period, as in the
+co-simulation.
 
 Packet periods are measured during the rebias, not assumed (notes/hardware.md: the FT-150 has been
 seen at 62.5, 100 and 200 Hz): the estimator's and the controller's expected periods are set to the
@@ -52,6 +54,7 @@ from hoh_cosim.control.supervisor import (
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import RunError
 from hoh_cosim.hardware.config import HardwareConfig
+from hoh_cosim.hardware.feed import CycleObserver
 from hoh_cosim.hardware.pressure import Canary, CpuPressure
 from hoh_cosim.hardware.robot import Robot, RobotState, named_problem
 from hoh_cosim.hardware.session_log import CycleRecord, SessionLog, at_log_resolution
@@ -208,6 +211,7 @@ class Runner:
         log: SessionLog | None = None,
         *,
         announce: Callable[[str], None] = lambda message: None,
+        observer: CycleObserver | None = None,
     ) -> None:
         self.config = config
         self.robot = robot
@@ -216,6 +220,8 @@ class Runner:
         self.calibration = calibration
         self.log = log
         self.announce = announce
+        # offered every cycle and every event, after the log (a bounded, dropping feed: `feed`)
+        self.observer = observer
         self.stop_requested = threading.Event()
         self.timing = CycleTiming()
         self._pressure = CpuPressure()
@@ -550,9 +556,13 @@ class Runner:
                 self._commanded_s = time.perf_counter()
             compute = time.perf_counter() - start
             self.timing.add(compute, late)
-            if self.log is not None:
-                self._k = k
-                self.log.record(CycleRecord(k, k * period, cycle, state, ft, probe, compute, late))
+            self._k = k
+            if self.log is not None or self.observer is not None:
+                record = CycleRecord(k, k * period, cycle, state, ft, probe, compute, late)
+                if self.log is not None:
+                    self.log.record(record)
+                if self.observer is not None:
+                    self.observer.offer(record, None if self.log is None else self.log.row)
             if cause is not None:
                 self._event("stop", cause)
                 return cause, False
@@ -588,11 +598,15 @@ class Runner:
     # --- logging -------------------------------------------------------------------------------
 
     def _event(self, event: str, detail: str) -> None:
+        if self.log is None and self.observer is None:
+            return
+        # before the robot told its period (it could not be reached), at the session's start
+        period = self.robot.period_s
+        t = self._k * period if math.isfinite(period) else 0.0
         if self.log is not None:
-            # before the robot told its period (it could not be reached), at the session's start
-            period = self.robot.period_s
-            t = self._k * period if math.isfinite(period) else 0.0
             self.log.event(self._k, t, event, detail)
+        if self.observer is not None:
+            self.observer.event(self._k, t, event, detail)
 
     def _log_parameters(
         self, estimator: Estimator, controller: HandGuidingController, rebias: Rebias

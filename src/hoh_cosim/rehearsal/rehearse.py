@@ -29,6 +29,7 @@ from hoh_cosim.hardware.config import (
     RebiasConfig,
     RobotConfig,
 )
+from hoh_cosim.hardware.feed import CycleObserver
 from hoh_cosim.hardware.fse103 import FSE103Port
 from hoh_cosim.hardware.ft150 import FT150Stream
 from hoh_cosim.hardware.robot import Robot, RtdeRobot
@@ -169,9 +170,13 @@ class RehearsalResult:
 
 
 def rehearse(
-    setup: Rehearsal, *, announce: Callable[[str], None] = lambda message: None
+    setup: Rehearsal,
+    *,
+    announce: Callable[[str], None] = lambda message: None,
+    observer: CycleObserver | None = None,
 ) -> RehearsalResult:
-    """Start the world, run one session against it for `setup.seconds`, stop everything."""
+    """Start the world, run one session against it for `setup.seconds`, stop everything;
+    `observer` is offered the runner's cycles (the live view's feed)."""
     # without a start time, the hand takes the handle once the runner says its rebias is done
     # (a start time guessed from the rebias's length came too early on a busy machine)
     world_setup = WorldSetup(
@@ -220,7 +225,9 @@ def rehearse(
                     world.start_task()
                 announce(message)
 
-            runner = Runner(config, robot, ft, probe, calibration, log, announce=tell)
+            runner = Runner(
+                config, robot, ft, probe, calibration, log, announce=tell, observer=observer
+            )
             session = runner.run(setup.seconds)
     return RehearsalResult(session, setup.log_path, probe.parser.framing, probe.parser.byte_order)
 

@@ -324,6 +324,54 @@ def _keep(mode: Mode) -> tuple[str, ...]:
     )
 
 
+def _kept(mode: Mode, more: Sequence[str]) -> tuple[str, ...]:
+    own = _keep(mode)
+    return own + tuple(s for s in more if s not in own)
+
+
+VIEWS = "views"
+"""The study's folder of recordings, one a kept run (`--record-view`)."""
+
+
+def _view_keep(scenarios: Path, modes: Mapping[str, Mode]) -> dict[str, tuple[str, ...]]:
+    """Each mode's signals that its runs' views are made of (`hoh_cosim.view.cosim`)."""
+    from hoh_cosim.cosim.scenario import load_scenario
+    from hoh_cosim.view.cosim import view_signals
+
+    return {
+        name: view_signals(load_scenario(scenarios / mode.scenario, mode.own(), preset=mode.preset))
+        for name, mode in modes.items()
+    }
+
+
+def _write_views(
+    folder: Path,
+    keyed: Sequence[tuple[tuple[int, str, str], Variant]],
+    got: Mapping[tuple[int, str, str], Outcome],
+    shared: Mapping[str, str],
+) -> None:
+    """One recording per kept run that ended well, `operator-01-view-freehand.rrd` (a mode that
+    shares another's runs has that mode's)."""
+    from hoh_cosim.cosim.scenario import load_scenario
+    from hoh_cosim.view.cosim import record_signals
+
+    folder.mkdir()
+    for (i, task, name), variant in keyed:
+        outcome = got.get((i, task, name))
+        if name in shared or outcome is None or not outcome.ok or outcome.time is None:
+            continue
+        scenario = load_scenario(
+            variant.scenario, variant.overrides, variant.duration_s, variant.seed, variant.preset
+        )
+        record_signals(
+            scenario,
+            outcome.time,
+            outcome.signals,
+            folder / f"operator-{i + 1:02d}-{task}-{name}.rrd",
+            title=f"operator {i + 1}, {task}, {name}",
+        )
+
+
 def operator_seed(seed: int, index: int) -> int:
     """The scenario seed of operator `index`'s runs: every mode and task of one operator shares it,
     so their tremor and their patient's breathing are the same in every run."""
@@ -357,9 +405,11 @@ def study_variants(
     seed: int,
     quick: bool,
     modes: Mapping[str, Mode] = MODES,
+    view_keep: Mapping[str, tuple[str, ...]] | None = None,
 ) -> list[tuple[tuple[int, str, str], Variant]]:
     """((operator, task, mode), run) for every run of the study, each checked against its scenario
-    first (so a mistake is one line before anything runs)."""
+    first (so a mistake is one line before anything runs); `view_keep` (mode -> signals): what a
+    kept run brings back besides its traces, for its view."""
     from hoh_cosim.cosim.scenario import load_scenario
 
     starts = {name: _start_s(scenarios, mode) for name, mode in modes.items()}
@@ -392,7 +442,7 @@ def study_variants(
                             operator_seed(seed, i),
                             duration,
                             "inprocess",
-                            _keep(mode) if i < 3 else (),
+                            _kept(mode, (view_keep or {}).get(name, ())) if i < 3 else (),
                             _KEEP_EVERY,
                             preset=mode.preset,
                         ),
@@ -552,11 +602,13 @@ def run_clinical(
     overrides: Sequence[str] = (),
     presets: Sequence[str] | None = None,
     figures_out: str | Path | None = None,
+    record_views: bool = False,
 ) -> ClinicalResult:
     """Run the study and write it to `out` (replaced whole): freehand and one assisted mode per
     preset (`presets`, default `STUDY_PRESETS`), `overrides` (`--set`) on every assisted mode
     (`study_modes`); with `figures_out`, the presets' measured figures as `hoh-cosim presets`
-    shows them (`hoh_cosim.presets.FIGURES`)."""
+    shows them (`hoh_cosim.presets.FIGURES`); with `record_views`, one Rerun recording per kept
+    run (the first three operators') in `out`/views/."""
     from hoh_cosim.cosim.run import jsonable
     from hoh_cosim.results import check_out_dir, check_writable, replace_dir
     from hoh_cosim.study.sweep import write_table
@@ -570,8 +622,14 @@ def run_clinical(
         check_writable(Path(figures_out).parent, "--figures")
     modes = study_modes(presets or STUDY_PRESETS, overrides)
     _needed(scenarios, modes)
+    view_keep = None
+    if record_views:
+        from hoh_cosim.view import require_rerun
+
+        require_rerun("--record-view")
+        view_keep = _view_keep(scenarios, modes)
     started = time.perf_counter()
-    keyed = study_variants(scenarios, n, seed, quick, modes)
+    keyed = study_variants(scenarios, n, seed, quick, modes, view_keep)
     _check_overrides(overrides, keyed, modes)
     shared = _shared_modes(scenarios, modes)
     todo = [(key, v) for key, v in keyed if key[2] not in shared]
@@ -616,6 +674,8 @@ def run_clinical(
             page_html(title, line, sections, _CSS), encoding="utf-8"
         )
         (staging / "report.md").write_text(page_markdown(title, line, sections), encoding="utf-8")
+        if record_views:
+            _write_views(staging / VIEWS, keyed, got, shared)
 
     replace_dir(out, fill, what="clinical study")
     if figures_out is not None:
