@@ -36,7 +36,7 @@ import numpy as np
 from hoh_cosim.control.block import Port
 from hoh_cosim.control.loadcell import ADC_COUNTS, LINE_RATE_HZ, SEED_CHAIN, force_L
 from hoh_cosim.control.vectors import Vec, as_scalar
-from plant_models.sensors import PacketClock, _PacketSensor, _rate_and_latency
+from plant_models.sensors import _PacketSensor, _rate_and_latency
 
 __all__ = [
     "OPEN_CIRCUIT_COUNT",
@@ -109,10 +109,7 @@ class LoadCellSensor(_PacketSensor):
     def __init__(
         self, params: LoadCellParams | None = None, rng: np.random.Generator | None = None
     ) -> None:
-        self.params = params or LoadCellParams()
-        self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.clock = PacketClock(self.params.rate_hz, self.params.latency_s)
-        self.reset()
+        super().__init__(params or LoadCellParams(), rng)
 
     def reset(self) -> None:
         self.clock.reset()

@@ -21,6 +21,7 @@ import math
 import struct
 from dataclasses import dataclass
 from itertools import product
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -28,7 +29,7 @@ import numpy.typing as npt
 from hoh_cosim.control.vectors import Vec, frozen
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.hardware.serial_source import SerialSource
-from hoh_cosim.hardware.streams import Mailbox, Sample, now
+from hoh_cosim.hardware.streams import Sample, now
 
 __all__ = [
     "BYTE_ORDERS",
@@ -386,25 +387,10 @@ class FSE103Port(SerialSource):
     setting of it is that far off)."""
 
     def __init__(
-        self,
-        device: str,
-        *,
-        baudrate: int = 115200,
-        framing: str = "auto",
-        byte_order: str = "auto",
-        mailbox: Mailbox | None = None,
-        reconnect: bool = True,
-        retry_s: float = 0.5,
-        timeout_s: float = 0.1,
+        self, device: str, *, framing: str = "auto", byte_order: str = "auto", **transport: Any
     ) -> None:
-        super().__init__(
-            device,
-            baudrate=baudrate,
-            mailbox=mailbox,
-            reconnect=reconnect,
-            retry_s=retry_s,
-            timeout_s=timeout_s,
-        )
+        """`transport`: `SerialSource`'s baudrate, mailbox, reconnect, retry_s, timeout_s."""
+        super().__init__(device, **transport)
         self._parser = FSE103Parser(framing, byte_order)
         self.raw_frames = 0
         self._bad_reported = 0
@@ -423,11 +409,6 @@ class FSE103Port(SerialSource):
     def __enter__(self) -> FSE103Port:
         self.start()
         return self
-
-    def _connected(self) -> None:
-        if self._parser.pending_bytes:
-            self._mailbox.count_bad(1)  # the old connection ended inside a frame
-        self._parser.reset()
 
     def _handle(self, data: bytes) -> None:
         frames = self._parser.feed(data)

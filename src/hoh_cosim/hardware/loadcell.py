@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Any
 
 from hoh_cosim.control.loadcell import (
     ADC_COUNTS,
@@ -46,7 +47,7 @@ from hoh_cosim.control.loadcell import (
     force_L,
 )
 from hoh_cosim.hardware.serial_source import SerialSource
-from hoh_cosim.hardware.streams import Mailbox, Sample, now
+from hoh_cosim.hardware.streams import Sample, now
 
 __all__ = [
     "LINE_FORMAT",
@@ -60,8 +61,9 @@ __all__ = [
 ]
 
 LINE_FORMAT = "LC,<ms>,<count>"
-MAX_LINE_BYTES = 32
-"""A line longer than this (ours are at most 20 bytes with the \\r\\n) is garbage, cut there."""
+MAX_LINE_BYTES = 64
+"""A line longer than this (ours are at most 20 bytes with the \\r\\n) is garbage: it counts a bad
+line every MAX_LINE_BYTES and the parser keeps no more than that."""
 LOCK_LINES = 3
 """Bad lines in a row, with no good one since the start, after which the port says what arrived."""
 _LINE = re.compile(rb"^LC,(\d{1,10}),(\d{1,4})\r?$")
@@ -114,6 +116,7 @@ class LoadCellParser:
         self.bad_lines = 0
         self.bad_run = 0
         self.last_bad = b""
+        self._cut = False  # inside a line longer than MAX_LINE_BYTES
 
     @property
     def pending_bytes(self) -> int:
@@ -122,6 +125,7 @@ class LoadCellParser:
     def reset(self) -> None:
         """Forget the pending bytes (after a reconnection); the counts are kept."""
         self._buf.clear()
+        self._cut = False
 
     @property
     def text_share(self) -> float:
@@ -141,12 +145,17 @@ class LoadCellParser:
             if end < 0:
                 if len(buf) - start > MAX_LINE_BYTES:  # no line end where one must be
                     self._bad(bytes(buf[start : start + MAX_LINE_BYTES]))
+                    self._cut = True
                     start += MAX_LINE_BYTES
                     continue
                 break
-            line = self._parse(bytes(buf[start:end]))
-            if line is not None:
-                lines.append(line)
+            if self._cut:  # the rest of a line cut before: bad, and its start is what it showed
+                self._bad(b"")
+            else:
+                line = self._parse(bytes(buf[start:end]))
+                if line is not None:
+                    lines.append(line)
+            self._cut = False
             start = end + 1
         del buf[:start]
         return lines
@@ -165,7 +174,8 @@ class LoadCellParser:
     def _bad(self, text: bytes) -> None:
         self.bad_lines += 1
         self.bad_run += 1
-        self.last_bad = text[:40]
+        if not self._cut:  # the start of a line cut in pieces is kept, not its later pieces
+            self.last_bad = text[:40]
 
     def diagnosis(self, device: str, baudrate: int) -> str | None:
         """One line on what arrives instead of a load cell's lines, or None while nothing says so
@@ -199,25 +209,10 @@ class LoadCellPort(SerialSource):
     """Line rates a rebias accepts: the sketch's 200 Hz, a fifth either side (on the Arduino's own
     milliseconds: only another sketch is that far off)."""
 
-    def __init__(
-        self,
-        device: str,
-        *,
-        baudrate: int = BAUDRATE,
-        chain: LoadCellChain = SEED_CHAIN,
-        mailbox: Mailbox | None = None,
-        reconnect: bool = True,
-        retry_s: float = 0.5,
-        timeout_s: float = 0.1,
-    ) -> None:
-        super().__init__(
-            device,
-            baudrate=baudrate,
-            mailbox=mailbox,
-            reconnect=reconnect,
-            retry_s=retry_s,
-            timeout_s=timeout_s,
-        )
+    def __init__(self, device: str, *, chain: LoadCellChain = SEED_CHAIN, **transport: Any) -> None:
+        """`transport`: `SerialSource`'s baudrate (BAUDRATE), mailbox, reconnect, retry_s,
+        timeout_s."""
+        super().__init__(device, **{"baudrate": BAUDRATE, **transport})
         self.chain = chain
         self._parser = LoadCellParser()
         self._bad_reported = 0
@@ -234,11 +229,6 @@ class LoadCellPort(SerialSource):
     def __enter__(self) -> LoadCellPort:
         self.start()
         return self
-
-    def _connected(self) -> None:
-        if self._parser.pending_bytes:
-            self._mailbox.count_bad(1)  # the old connection ended inside a line
-        self._parser.reset()
 
     def _handle(self, data: bytes) -> None:
         parser = self._parser

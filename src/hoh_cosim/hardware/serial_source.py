@@ -22,7 +22,10 @@ __all__ = ["SerialSource"]
 
 
 class SerialSource:
-    """A serial device read by a thread; subclasses give `describe`, `_handle` and `_connected`."""
+    """A serial device read by a thread; subclasses give `describe` and `_handle`, and their parser
+    (`_parser`, with `pending_bytes` and `reset()`) is reset on every new connection."""
+
+    _parser: Any
 
     def __init__(
         self,
@@ -67,7 +70,11 @@ class SerialSource:
         raise NotImplementedError
 
     def _connected(self) -> None:
-        """A new connection is open: the parser's state of the old one is stale."""
+        """A new connection is open: the parser's state of the old one is stale, and a frame or
+        line the old one left unfinished counts as one bad."""
+        if self._parser.pending_bytes:
+            self._mailbox.count_bad(1)
+        self._parser.reset()
 
     def start(self) -> None:
         """Start reading in the background (a second call while running does nothing)."""
