@@ -165,3 +165,28 @@ def test_hw_rehearse_with_the_load_cell_runs_a_clean_session(tmp_path, capsys):
     session = read_session(log)
     assert session.complete
     assert "robot: guiding in contact" in out  # the scan's press reached the phantom
+
+
+@REAL_TIME
+def test_an_fse103_where_the_rig_says_load_cell_ends_the_start_in_one_line(tmp_path):
+    """The runner given a load cell's driver on the FSE103's port: no session, one line naming the
+    port, the expected lines and what came instead, and the robot never commanded to move."""
+    from hoh_cosim.hardware.ft150 import FT150Stream
+    from hoh_cosim.hardware.runner import Runner
+    from hoh_cosim.rehearsal.rehearse import rehearsal_config, truth_calibration
+    from hoh_cosim.rehearsal.world import RehearsalWorld, WorldSetup
+
+    with RehearsalWorld(WorldSetup(task_start_s=None, watchdog_hz=5.0)) as world:
+        config = rehearsal_config(world, tmp_path, rebias_samples=100)
+        ft = FT150Stream("127.0.0.1", world.ft_port)
+        probe = LoadCellPort(world.pty_name, reconnect=False)
+        robot = world.robot()
+        result = Runner(config, robot, ft, probe, truth_calibration(world.truth)).run(5.0)
+        assert world.last_commanded() != world.last_commanded()  # NaN: never asked to move
+    assert not result.clean
+    assert result.rebias is None
+    assert "\n" not in result.cause
+    assert result.cause.startswith(f"load cell on {world.pty_name}: no data within 5 s (")
+    assert "expected lines 'LC,<ms>,<count>' at 115200 baud, got bytes that are not text" in (
+        result.cause
+    )

@@ -295,3 +295,9 @@ def test_the_lines_come_back_whatever_the_garbage_between_them_and_the_chunking(
         assert parser.pending_bytes <= MAX_LINE_BYTES
     assert lines == [LoadCellLine(100 + k, 10 * k) for k in range(len(good))]
     assert parser.bad_lines >= len(garbage)
+
+
+def test_a_text_line_with_a_stray_byte_is_shown_escaped():
+    parser = LoadCellParser()
+    parser.feed(b"F 1.0 2.0 3.0 \xb0C\r\n" * LOCK_LINES)
+    assert "got 'F 1.0 2.0 3.0 \\\\xb0C'" in parser.diagnosis("/dev/x", 115200)

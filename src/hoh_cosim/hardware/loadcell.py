@@ -182,15 +182,16 @@ class LoadCellParser:
         (a good line came, or fewer than LOCK_LINES bad ones since the start or the last good)."""
         if self.bad_run < LOCK_LINES:
             return None
-        got = self.last_bad.rstrip(b"\r")[:24].decode("ascii", "backslashreplace")
+        shown = self.last_bad.rstrip(b"\r")[:24]
         expected = f"expected lines '{LINE_FORMAT}' at {baudrate} baud"
         if self.text_share < 0.75:
             return (
                 f"load cell on {device}: {expected}, got bytes that are not text "
-                f"({got!r}): the device's baud rate is another, or it is not a load cell"
+                f"({shown!r}): the device's baud rate is another, or it is not a load cell"
             )
+        text = shown.decode("ascii", "backslashreplace")
         return (
-            f"load cell on {device}: {expected}, got {got!r}: the device on the port is not a "
+            f"load cell on {device}: {expected}, got {text!r}: the device on the port is not a "
             "load cell (its line format is another)"
         )
 
