@@ -153,6 +153,20 @@ def _loadcell_setting(text: str) -> tuple[str, str]:
     return name, value
 
 
+def _add_loadcell_settings(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--loadcell",
+        dest="loadcell",
+        action="append",
+        default=[],
+        type=_loadcell_setting,
+        metavar="PARAM=VALUE",
+        help="a parameter of the emulated load cell (with --probe-sensor loadcell; repeatable), "
+        "its faults among them: saturated=true (the seed's cell), open_circuit=true, "
+        "zero_drift_N_per_min=RATE (default: a sound cell)",
+    )
+
+
 def _add_preset(parser: argparse.ArgumentParser, default: str) -> None:
     from hoh_cosim.commands.cosim import add_preset_option
 
@@ -355,17 +369,7 @@ def add_commands(sub: Any) -> None:
     add_view_options(rehearse, "the session")
     _add_preset(rehearse, _default_preset())
     _add_probe_sensor(rehearse, "fse103")
-    rehearse.add_argument(
-        "--loadcell",
-        dest="loadcell",
-        action="append",
-        default=[],
-        type=_loadcell_setting,
-        metavar="PARAM=VALUE",
-        help="a parameter of the emulated load cell (with --probe-sensor loadcell; repeatable), "
-        "its faults among them: saturated=true (the seed's cell), open_circuit=true, "
-        "zero_drift_N_per_min=RATE (default: a sound cell)",
-    )
+    _add_loadcell_settings(rehearse)
     rehearse.add_argument(
         "--set",
         dest="overrides",
@@ -460,6 +464,8 @@ def add_commands(sub: Any) -> None:
         help="what the emulated operator's hand does from --task-start (default: off, nobody "
         "touches the handle)",
     )
+    _add_probe_sensor(emulate, "fse103")
+    _add_loadcell_settings(emulate)
     emulate.add_argument(
         "--task-start",
         type=float,
@@ -876,6 +882,8 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         phantom_below_m=0.03 if args.task in CONTACT_TASKS else None,
         ft_host=args.host,
         ft_port=args.ft_port,
+        probe_sensor=args.probe_sensor or "fse103",
+        loadcell=_loadcell_params(args.loadcell, args.probe_sensor or "fse103"),
     )
     with RehearsalWorld(setup) as world:
         try:
@@ -890,7 +898,9 @@ def _hw_emulate(args: argparse.Namespace) -> int:
                 flush=True,
             )
             print(f"FT-150 stream on {args.host}:{world.ft_port}", flush=True)
-            print(f"FSE103 on {world.pty_name}", flush=True)
+            probe = {"fse103": "FSE103", "loadcell": "load cell (Arduino)"}.get(setup.probe_sensor)
+            if probe is not None:
+                print(f"{probe} on {world.pty_name}", flush=True)
             print("ready" + ("" if args.seconds else " (Ctrl-C ends)"), flush=True)
             deadline = None if args.seconds is None else time.monotonic() + args.seconds
             while deadline is None or time.monotonic() < deadline:
