@@ -15,6 +15,7 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -246,9 +247,15 @@ def _metadata(config: HardwareConfig, setup: WorldSetup) -> dict:
         "period_s": 1.0 / setup.robot_rate_hz,
         "R_TS": config.robot.R_TS.tolist(),
         "world": {
-            field.name: getattr(setup, field.name)
-            if field.name != "faults"
-            else [(f.at_s, f.kind) for f in setup.faults]
-            for field in dataclasses.fields(setup)
+            field.name: _world_value(setup, field.name) for field in dataclasses.fields(setup)
         },
     }
+
+
+def _world_value(setup: WorldSetup, name: str) -> Any:
+    """A world parameter as the log's metadata keeps it (plain values)."""
+    if name == "faults":
+        return [(f.at_s, f.kind) for f in setup.faults]
+    if name == "planted":
+        return dataclasses.asdict(setup.planted)
+    return getattr(setup, name)

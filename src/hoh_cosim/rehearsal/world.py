@@ -38,6 +38,7 @@ from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pacer, RobotState
 from hoh_cosim.rehearsal.faults import FAULTS, Fault
+from hoh_cosim.rehearsal.planted import Planted
 from hoh_cosim.rehearsal.priorities import HARDWARE_PRIORITY
 from plant_models.arm import ArmParams
 from plant_models.breathing import Breathing, BreathingParams
@@ -143,6 +144,8 @@ class WorldSetup:
     away_time_s: float = 0.3
     ft_host: str = "127.0.0.1"  # where the FT-150 stream listens
     ft_port: int = 0  # 0: any free port (the URCap's daemon uses 63351)
+    # sensor faults from the start, for `hw check --rehearse --fault` (rehearsal.planted)
+    planted: Planted = field(default_factory=Planted)
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -246,7 +249,7 @@ class _World:
         self._acceleration = np.zeros(1)  # speedL's a of the last command
         rng = np.random.default_rng(setup.seed)
         self.ft = FT150Sensor(FT150Params(rate_hz=setup.ft_rate_hz), rng=rng)
-        self.probe = FSE103Sensor(FSE103Params(), rng=rng)
+        self.probe = FSE103Sensor(setup.planted.fse103_params(FSE103Params()), rng=rng)
         self.listener = socket.create_server((setup.ft_host, setup.ft_port))
         self.listener.setblocking(False)
         self.ft_port = self.listener.getsockname()[1]
@@ -504,14 +507,15 @@ class _World:
         before = self.ft.clock.delivered
         ft = self.ft.step(t, WORLD_DT, {"wrench_S_true": self.outputs["wrench_S"]})
         if self.ft.clock.delivered != before:
-            values = ft["wrench_S"]
+            values = self.setup.planted.ft_values(ft["wrench_S"])
             if self.ft_spike:
                 values = values + np.array([0.0, 0.0, self.ft_spike, 0.0, 0.0, 0.0])
             if self.nan_next or self.ft_nan:
                 values, self.nan_next = np.full(6, math.nan), False
             self._send_ft(self.encode_sample(values))
         before = self.probe.clock.delivered
-        force = self.outputs["force_P"] + np.array([0.0, 0.0, self.spike])
+        force = self.setup.planted.probe_force(self.outputs["force_P"])
+        force = force + np.array([0.0, 0.0, self.spike])
         probe = self.probe.step(t, WORLD_DT, {"force_P_true": force})
         if self.probe.clock.delivered != before:
             self._send_probe(
