@@ -518,8 +518,17 @@ def _add_check(hw_sub: Any) -> None:
 
 def _hw_check(args: argparse.Namespace) -> int:
 
+    from hoh_cosim.hardware.check import PROBE_SENSORS, SENSORS
+
     if args.rehearse == (args.config is not None):
         raise ConfigError("hw check: give CONFIG.yaml for a robot, or --rehearse, not both")
+    if args.probe_sensor is not None and args.probe_sensor not in PROBE_SENSORS:
+        raise ConfigError(
+            f"--probe-sensor: expected one of {', '.join(PROBE_SENSORS)}, got {args.probe_sensor!r}"
+        )
+    for name in args.override:
+        if name not in SENSORS:
+            raise ConfigError(f"--override: expected one of {', '.join(SENSORS)}, got {name!r}")
     if args.repeat:
         return _check_tally(args)
     if args.rehearse:

@@ -53,6 +53,8 @@ from hoh_cosim.errors import ConfigError
 __all__ = [
     "FT150_RANGE",
     "PROBE_CHECKS",
+    "PROBE_SENSORS",
+    "SENSORS",
     "CheckRecord",
     "Claims",
     "Finding",
@@ -71,6 +73,12 @@ __all__ = [
     "report",
     "session_refusal",
 ]
+
+PROBE_SENSORS = ("fse103", "loadcell", "none")
+"""The probe sensors a check knows (`--probe-sensor`); each but none has its `PROBE_CHECKS` entry
+where its driver is in the build."""
+SENSORS = ("ft150", "fse103", "loadcell")
+"""The sensors a verdict names (`--override`)."""
 
 FT150_RANGE = np.array([150.0] * 3 + [15.0] * 3)
 """[N, N·m] The Robotiq FT-150's measuring range per axis (its data sheet: ±150 N, ±15 N·m)."""

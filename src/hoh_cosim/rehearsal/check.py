@@ -23,12 +23,12 @@ from pathlib import Path
 from typing import Any
 
 from hoh_cosim.errors import ConfigError, RunError
-from hoh_cosim.hardware.check import Claims, SensorVerdict, judge
+from hoh_cosim.hardware.check import PROBE_SENSORS, Claims, SensorVerdict, judge
 from hoh_cosim.hardware.check_run import REHEARSAL_PLAN, CheckPlan, RecordingMailbox, record_check
 from hoh_cosim.hardware.fse103 import FSE103Port
 from hoh_cosim.hardware.ft150 import FT150Stream
 from hoh_cosim.hardware.robot import Robot, RtdeRobot
-from hoh_cosim.rehearsal.planted import PLANTED, PROBE_SENSORS, planted_world
+from hoh_cosim.rehearsal.planted import PLANTED, planted_world
 from hoh_cosim.rehearsal.rehearse import UR_SERIES, rehearsal_config, truth_calibration
 from hoh_cosim.rehearsal.world import RehearsalWorld, WorldSetup
 

@@ -36,10 +36,7 @@ from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError
 from plant_models.sensors import HousingParams
 
-__all__ = ["PLANTED", "PROBE_SENSORS", "Planted", "PlantedFault", "planted_world"]
-
-PROBE_SENSORS = ("fse103", "loadcell", "none")
-"""The probe sensors a check knows (`--probe-sensor`); `loadcell` needs the load cell's driver."""
+__all__ = ["PLANTED", "Planted", "PlantedFault", "planted_world"]
 
 
 @dataclass(frozen=True)
