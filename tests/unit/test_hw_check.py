@@ -23,11 +23,15 @@ from hoh_cosim.hardware.check import (
     MAP_RESIDUAL_N,
     CheckRecord,
     Claims,
+    LoadCellSpec,
+    ProbeEvidence,
     Stream,
     Window,
+    check_loadcell,
     frame_fit,
     judge,
     map_residual_N,
+    push_pairs,
     rate_figures,
     report,
     session_refusal,
@@ -73,7 +77,9 @@ def record(
     plan += [("pose", 2.0 + 1.5 * i, 2.5 + 1.5 * i, R) for i, R in enumerate(poses)]
     plan += [("rest", 7.0, 8.0, R_BS_EQ1), ("pushes", 8.0, 15.0, R_BS_EQ1)]
     windows = tuple(Window(kind, a, b, R) for kind, a, b, R in plan)
-    axis_S = np.array([0.0, 0.0, -1.0])  # the tip pushed up its axis, within 60°
+    axis_S = np.array(
+        [0.0, 0.0, 1.0]
+    )  # the tip pushed up its axis (+z_S = +z_B at home), within 60°
     directions = []
     for _ in range(3):
         tilt, azimuth = np.radians(rng.uniform(10, 50)), rng.uniform(0, 2 * np.pi)
@@ -96,7 +102,8 @@ def record(
         ft[:, ft_dead] = 0.0
     t_p = np.arange(0.0, 15.0, 0.02)
     sensor = FSE103Sensor(FSE103Params(housing=housing or HousingParams()), rng=rng)
-    f_P = truth_S(t_p)[:, :3] @ R_SP_SEED  # R_SPᵀ f_S, row by row
+    # the probe sensor carries the pushes on the tip only: R_SPᵀ f_S, row by row
+    f_P = _pushes_S(t_p, 8.0, np.array(directions), peaks) @ R_SP_SEED
     turn = np.eye(3) if probe_rotation is None else probe_rotation
     m_P = np.array([sensor.housing_output(turn @ f) for f in f_P])
     m_P += np.array([0.3, -0.2, 0.5]) + rng.standard_normal(m_P.shape) * SIGMA_P
@@ -145,8 +152,10 @@ def test_a_probe_sensor_turned_a_quarter_turn_about_its_axis():
 
 
 def test_a_probe_sensor_with_an_axis_flipped_is_a_reflection():
-    _, probe = judge(record(probe_rotation=np.diag([1.0, -1.0, 1.0])), CLAIMS, "fse103")
-    assert "axis sign flipped: the best fit is a reflection" in _failed(probe)["frame"]
+    # seed 2's pushes span space (their third singular value a quarter of the first): pushes in a
+    # plane show a flip across it as a turn, or not at all (frame_fit)
+    _, probe = judge(record(2, probe_rotation=np.diag([1.0, -1.0, 1.0])), CLAIMS, "fse103")
+    assert "axis sign flipped: a reflection fits with " in _failed(probe)["frame"]
 
 
 def test_a_housing_beyond_the_online_map_recommends_the_probe_check():
@@ -243,3 +252,56 @@ def test_planted_faults_reach_the_world_and_refuse_what_a_probe_cannot_show():
         planted_world(["probe_frame_rotated"], "none")
     planted, _ = planted_world(["probe_frame_rotated"], "fse103")
     assert planted.probe_force(np.array([1.0, 2.0, 0.0])) == pytest.approx([1.0, 0.0, 2.0])
+
+
+# --- the load cell's entry, on samples as its driver would deliver them ------------------------
+COUNTS_PER_N = 20.0  # an illustrative gain for the test: 10-bit ADC, ~50 N span
+LOADCELL = LoadCellSpec(counts_of=lambda newtons: 100.0 + COUNTS_PER_N * np.asarray(newtons))
+
+
+def loadcell_record(saturated: bool, seed: int = 1) -> CheckRecord:
+    """The FSE103's record with a load cell in its place: counts 100 + 20/N along its z (the
+    probe's axis, compression positive), quantised to whole counts; saturated: pinned at the ADC's
+    top with a count's flicker, as the seed's (Fig. 9)."""
+    base = record(seed, housing=HousingParams(redirection=0, gain_error=0, stiffening=0))
+    probe = base.probe
+    assert probe is not None
+    push = base.probe.values - np.array([0.3, -0.2, 0.5])  # the housing passes the push whole
+    counts = np.round(100.0 + COUNTS_PER_N * np.maximum(push[:, 0], 0.0))  # the probe's axis: x_P
+    if saturated:
+        rng = np.random.default_rng(seed)
+        counts = 1022.0 + rng.integers(0, 2, counts.size)
+    newtons = (counts - 100.0) / COUNTS_PER_N
+    values = np.column_stack([np.zeros_like(newtons), np.zeros_like(newtons), newtons])
+    return CheckRecord(base.ft, Stream(probe.t_s, values), base.windows)
+
+
+# the load cell's frame: its z along the probe's axis (x_P of eq. 2)
+LOADCELL_CLAIMS = Claims(
+    ft_rate_hz=200.0,
+    probe_rate_hz=50.0,
+    R_SP=R_SP_SEED @ np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]),
+    tool=SEED_TOOL,
+)
+
+
+def _judge_loadcell(rec: CheckRecord):
+    f_ref, m = push_pairs(rec, LOADCELL_CLAIMS.R_SP)
+    evidence = ProbeEvidence(rec.probe, rec, f_ref, m)
+    return check_loadcell(evidence, LOADCELL_CLAIMS, LOADCELL)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_healthy_load_cell_follows_the_pushes(seed):
+    verdict = _judge_loadcell(loadcell_record(saturated=False, seed=seed))
+    assert verdict.ok, verdict.line()
+    response = next(f for f in verdict.findings if f.what == "response")
+    assert 0.8 < response.value < 1.2
+
+
+def test_a_saturated_load_cell_says_so_with_its_figure():
+    verdict = _judge_loadcell(loadcell_record(saturated=True))
+    line = verdict.line()
+    assert line.startswith("load cell: FAIL saturated: pushes of "), line
+    assert "moved it 1 counts against >= " in line
+    assert "% of readings at an ADC rail" in line

@@ -58,12 +58,14 @@ __all__ = [
     "CheckRecord",
     "Claims",
     "Finding",
+    "LoadCellSpec",
     "ProbeEvidence",
     "SensorVerdict",
     "Stream",
     "Window",
     "check_fse103",
     "check_ft150",
+    "check_loadcell",
     "frame_fit",
     "gravity_gains",
     "judge",
@@ -121,6 +123,8 @@ FRAME_ANGLE_MAX_DEG = 40.0
 """The probe sensor's frame within 40° of eq. 2: the seed's housing turns a push by about 20° per
 σ of its cross gains (σ 0.25, `HousingParams`: atan(0.25·√2)), 40° is two of them; a sensor
 mounted a quarter turn off the probe's axis is 90° off (less the housing's own turn)."""
+PLANAR = 0.1
+"""Pushes whose third singular value is under a tenth of the first span a plane, not space."""
 PUSH_GAIN = (0.5, 1.5)
 """The probe's push over the wrist's within 0.5-1.5: the housing's gains (σ 0.15) and stiffening."""
 MAP_RESIDUAL_N = 1.5
@@ -503,25 +507,33 @@ def _moving_average(t_s: Vec, values: Vec, width_s: float) -> Vec:
 
 
 def frame_fit(f_ref_P: Vec, m_P: Vec) -> dict[str, Any]:
-    """The orthogonal matrix Q that best turns the wrist's pushes into the probe's, m ≈ s Q f
-    (Kabsch: Q = U diag(1, 1, ±1) Vᵀ from the SVD of Σ m fᵀ), its angle [deg], whether the best
-    fit is a reflection (an axis flipped) and the scale s = Σ m·Qf / Σ |f|²."""
+    """The rotation Q that best turns the wrist's pushes into the probe's, m ≈ s Q f (Kabsch:
+    Q = U diag(1, 1, det(U Vᵀ)) Vᵀ from the SVD U Σ Vᵀ of Σ m fᵀ), its angle [deg] and the scale
+    s = Σ m·Qf / Σ |f|²; `reflected` when the best reflection (the last sign the other way) fits
+    with under half the rotation's residual: an axis flipped. Pushes that span a plane only fit a
+    rotation and its reflection alike, and are not taken for a flip."""
     H = m_P.T @ f_ref_P
     U, _, Vt = np.linalg.svd(H)
-    reflected = bool(np.linalg.det(U @ Vt) < 0.0)
-    Q_best = U @ Vt
-    D = np.diag([1.0, 1.0, -1.0 if reflected else 1.0])
-    Q = U @ D @ Vt
+    d = 1.0 if np.linalg.det(U @ Vt) > 0.0 else -1.0
+
+    def fit(last: float) -> tuple[Vec, float, float]:
+        Q = U @ np.diag([1.0, 1.0, last]) @ Vt
+        turned = f_ref_P @ Q.T
+        scale = float(np.sum(m_P * turned) / max(np.sum(turned**2), 1e-12))
+        return Q, scale, float(np.sqrt(np.mean(np.sum((m_P - scale * turned) ** 2, axis=1))))
+
+    Q, scale, residual = fit(d)
+    _, _, mirrored = fit(-d)
+    spread = np.linalg.svd(f_ref_P, compute_uv=False)
     angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(Q) - 1.0) / 2.0))))
-    turned = f_ref_P @ Q.T
-    scale = float(np.sum(m_P * turned) / max(np.sum(f_ref_P**2), 1e-12))
-    # a reflection is judged by the orthogonal fit with the flip: a flipped axis has det(Q) = -1
     return {
         "Q": Q,
-        "Q_orthogonal": Q_best,
         "angle_deg": angle,
-        "reflected": reflected,
         "scale": scale,
+        "reflected": mirrored < 0.5 * residual,
+        "residual_N": residual,
+        "mirrored_residual_N": mirrored,
+        "planar": bool(spread[2] < PLANAR * spread[0]),
     }
 
 
@@ -617,9 +629,14 @@ def check_fse103(evidence: ProbeEvidence, claims: Claims) -> SensorVerdict:
         )
     )
     if fit["reflected"]:
-        text = f"axis sign flipped: the best fit is a reflection ({fit['angle_deg']:.0f}° with it)"
+        text = (
+            f"axis sign flipped: a reflection fits with {fit['mirrored_residual_N']:.2f} N RMS, "
+            f"a rotation with {fit['residual_N']:.2f} N"
+        )
     else:
         text = f"frame off eq. 2 by {fit['angle_deg']:.0f}° against <= {FRAME_ANGLE_MAX_DEG:g}°"
+    if fit["planar"]:
+        text += " (the pushes spanned a plane: a flip across it shows as a turn, or not at all)"
     findings.append(
         _bounded(
             "frame",
@@ -651,10 +668,103 @@ def _linear_gain(f: Vec, m: Vec) -> Vec:
     return G_T.T
 
 
+@dataclass(frozen=True)
+class LoadCellSpec:
+    """What the load cell's check needs of its model (seed 3.B.2, Fig. 8: the Honeywell Model 31
+    through an INA125P into an Arduino's 10-bit ADC): newtons of compression to ADC counts, the
+    ADC's top count, and the noise at rest [N] the model gives (0 where one count swamps it)."""
+
+    counts_of: Callable[[Vec], Vec]
+    adc_max: int = 1023
+    noise_N: float = 0.0
+
+
+SATURATED_SPAN = 0.1
+"""A load cell whose counts move by under a tenth of what the wrist's push should give (or by
+under 3 counts) is saturated: the seed's moved 1 count (0.005 V of 5 V) under compression."""
+
+
+def check_loadcell(evidence: ProbeEvidence, claims: Claims, spec: LoadCellSpec) -> SensorVerdict:
+    """The load cell's verdict: its stream; whether its counts follow the wrist's push along its
+    axis (z of its frame: compression only), or sit saturated (seed 3.B.2, Fig. 9); the gain, sign
+    and linearity of the newtons it reports against the wrist's."""
+    sigma = np.full(3, max(spec.noise_N, 1e-6))
+    findings = stream_findings(
+        evidence.stream,
+        evidence.record,
+        claims.probe_rate_hz,
+        sigma,
+        AXES_P,
+        ("N",) * 3,
+        DRIFT_LIMIT[:3],
+        noise_low=False,  # a 10-bit ADC at rest may read one count throughout
+    )
+    if spec.noise_N == 0.0:  # one count swamps the noise: nothing to judge at rest
+        findings = [f for f in findings if f.what != "noise"]
+    pushes, _ = _push_findings(evidence)
+    findings += pushes
+    verdict = SensorVerdict("loadcell", "load cell", findings)
+    if not pushes[0].ok:
+        return verdict
+    if not evidence.reference_ok:
+        findings.append(_unjudged())
+        return verdict
+    f_z, m_z = evidence.f_ref_P[:, 2], evidence.m_P[:, 2]
+    reach = float(np.max(f_z))
+    expected = float(spec.counts_of(np.array([reach]))[0] - spec.counts_of(np.array([0.0]))[0])
+    counts = spec.counts_of(evidence.stream.values[:, 2])
+    span = float(np.ptp(spec.counts_of(m_z))) if len(m_z) else 0.0
+    at_rail = float(np.mean((counts <= 0.5) | (counts >= spec.adc_max - 0.5)))
+    saturated = span < max(3.0, SATURATED_SPAN * abs(expected)) or at_rail > 0.5
+    findings.append(
+        _bounded(
+            "range",
+            not saturated,
+            (
+                f"saturated: pushes of {reach:.1f} N along its axis moved it {span:.0f} counts "
+                f"against >= {max(3.0, SATURATED_SPAN * abs(expected)):.0f} "
+                f"(expected {abs(expected):.0f}); {100 * at_rail:.0f} % of readings at an ADC rail"
+            )
+            if saturated
+            else f"pushes moved it {span:.0f} counts of {spec.adc_max}",
+            span,
+            max(3.0, SATURATED_SPAN * abs(expected)),
+        )
+    )
+    if saturated:
+        return verdict
+    loaded = f_z > PUSH_SAMPLE_N
+    x, y = f_z[loaded], m_z[loaded]
+    gain = float(x @ y / (x @ x)) if len(x) else 0.0
+    lo, hi = PUSH_GAIN
+    findings.append(
+        _bounded(
+            "response",
+            lo <= gain <= hi,
+            (f"axis sign flipped: gain {gain:+.2f}" if gain < -0.2 else f"gain {gain:+.2f}")
+            + f" against {lo:g}-{hi:g} of the wrist's push along its axis",
+            gain,
+            list(PUSH_GAIN),
+        )
+    )
+    residual = float(np.sqrt(np.mean((y - gain * x) ** 2))) if len(x) else 0.0
+    findings.append(
+        _bounded(
+            "linearity",
+            residual <= FIT_RESIDUAL_N,
+            f"a line through zero leaves {residual:.2f} N RMS against <= {FIT_RESIDUAL_N:g} N",
+            residual,
+            FIT_RESIDUAL_N,
+        )
+    )
+    return verdict
+
+
 ProbeCheck = Callable[[ProbeEvidence, Claims], SensorVerdict]
 
 PROBE_CHECKS: dict[str, ProbeCheck] = {"fse103": check_fse103}
-"""Per probe sensor, its check over what its stream delivered (a load cell adds its entry)."""
+"""Per probe sensor, its check over what its stream delivered. The load cell's entry, where its
+model is in the build: `functools.partial(check_loadcell, spec=LoadCellSpec(counts_of=...))`."""
 
 
 # --- the whole check ------------------------------------------------------------------------------
