@@ -114,3 +114,16 @@ def test_a_check_needs_a_rig_file_or_a_rehearsal(capsys):
     assert (
         "hw check: give CONFIG.yaml for a robot, or --rehearse, not both" in capsys.readouterr().err
     )
+
+
+def test_a_rig_check_refuses_a_rig_without_calibration_before_it_moves(tmp_path, capsys):
+    rig = tmp_path / "rig.yaml"
+    rig.write_text("robot:\n  host: 192.0.2.1\nprobe: null\n")
+    status = main(["hw", "check", str(rig), "--out", str(tmp_path / "c.json")])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert "rig.yaml: calibration: missing (run 'hoh-cosim hw calibrate')" in err
+    assert main(["hw", "check", str(rig), "--probe-sensor", "fse103"]) == 2
+    assert "--probe-sensor: " in capsys.readouterr().err
+    assert main(["hw", "check", str(rig), "--fault", "ft_rate_low"]) == 2
+    assert "--fault: a fault is planted only in a rehearsal" in capsys.readouterr().err
