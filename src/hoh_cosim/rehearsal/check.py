@@ -81,6 +81,7 @@ def rehearse_check(
         task_start_s=None,
         probe_check_s=PUSHES_S if probe_sensor != "none" else 0.0,
         seed=seed,
+        hand_seed=seed,  # the pushes differ from seed to seed, as the sensors' noise
         planted=planted,
         **changes,
     )

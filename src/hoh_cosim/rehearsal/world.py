@@ -146,6 +146,7 @@ class WorldSetup:
     ft_port: int = 0  # 0: any free port (the URCap's daemon uses 63351)
     # sensor faults from the start, for `hw check --rehearse --fault` (rehearsal.planted)
     planted: Planted = field(default_factory=Planted)
+    hand_seed: int | None = None  # the hand's draws (pushes, tremor) from it; None: its own
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -228,7 +229,8 @@ class _World:
                 retake_s=setup.retake_s,
                 next_s=next_view,
                 probe_check_s=setup.probe_check_s,
-            )
+            ),
+            rng=None if setup.hand_seed is None else np.random.default_rng([setup.hand_seed, 2]),
         )
         self.breathing = (
             Breathing(
