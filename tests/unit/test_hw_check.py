@@ -299,6 +299,19 @@ def test_a_healthy_load_cell_follows_the_pushes(seed):
     assert 0.8 < response.value < 1.2
 
 
+def test_a_load_cell_whose_z_points_down_the_probe_reads_compression_negative():
+    """eq. 3 turns the load cell's z down the probe: compression then reads negative newtons."""
+    rec = loadcell_record(saturated=False)
+    assert rec.probe is not None
+    flipped = CheckRecord(rec.ft, Stream(rec.probe.t_s, -rec.probe.values), rec.windows)
+    down = np.diag([-1.0, 1.0, -1.0])  # z_L and x_L turned about y_L
+    claims = Claims(200.0, 50.0, LOADCELL_CLAIMS.R_SP @ down, SEED_TOOL)
+    spec = LoadCellSpec(counts_of=lambda newtons: 100.0 - COUNTS_PER_N * np.asarray(newtons))
+    f_ref, m = push_pairs(flipped, claims.R_SP)
+    verdict = check_loadcell(ProbeEvidence(flipped.probe, flipped, f_ref, m), claims, spec)
+    assert verdict.ok, verdict.line()
+
+
 def test_a_saturated_load_cell_says_so_with_its_figure():
     verdict = _judge_loadcell(loadcell_record(saturated=True))
     line = verdict.line()

@@ -142,12 +142,11 @@ REDIRECTION_ADVICE = 0.1
 # --- what was recorded --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Stream:
-    """What one sensor delivered: receipt times [s] (monotonic), values (n x axes), counts."""
+    """What one sensor delivered: receipt times [s] (monotonic), values (n x axes)."""
 
     t_s: Vec
     values: Vec
     bad_frames: int = 0
-    raw: Vec | None = None  # the sensor's own units, where it has them (an ADC's counts)
 
     @staticmethod
     def of(samples: Sequence[Any], bad_frames: int = 0, axes: int = 3) -> Stream:
@@ -709,11 +708,16 @@ def check_loadcell(evidence: ProbeEvidence, claims: Claims, spec: LoadCellSpec) 
     if not evidence.reference_ok:
         findings.append(_unjudged())
         return verdict
-    f_z, m_z = evidence.f_ref_P[:, 2], evidence.m_P[:, 2]
+    # compression is the pushes' side of z, whichever sign the driver gives it (eq. 3 turns z_L
+    # down the probe); the probe's reading is taken on the same side
+    side = 1.0 if float(np.sum(evidence.f_ref_P[:, 2])) >= 0.0 else -1.0
+    f_z, m_z = side * evidence.f_ref_P[:, 2], side * evidence.m_P[:, 2]
     reach = float(np.max(f_z))
-    expected = float(spec.counts_of(np.array([reach]))[0] - spec.counts_of(np.array([0.0]))[0])
+    expected = float(
+        spec.counts_of(np.array([side * reach]))[0] - spec.counts_of(np.array([0.0]))[0]
+    )
     counts = spec.counts_of(evidence.stream.values[:, 2])
-    span = float(np.ptp(spec.counts_of(m_z))) if len(m_z) else 0.0
+    span = float(np.ptp(spec.counts_of(side * m_z))) if len(m_z) else 0.0
     at_rail = float(np.mean((counts <= 0.5) | (counts >= spec.adc_max - 0.5)))
     saturated = span < max(3.0, SATURATED_SPAN * abs(expected)) or at_rail > 0.5
     findings.append(
