@@ -4,8 +4,8 @@ The seed lost weeks to sensors that streamed plausible numbers and were wrong (s
 load cell in constant saturation, an FSE103 whose housing redirected force; 5.A). The commissioning
 check (`hoh_cosim.hardware.check_run` moves the robot and records) gives this module a
 `CheckRecord`: every sample of every stream with its time of receipt, and the check's windows (rest
-at the start, the probe pushes, the static poses, rest at the end) with the wrist's mean
-orientation in each. Per sensor it measures and judges:
+at the start, the static poses, rest at the end, the pushes on the probe's tip) with the wrist's
+mean orientation in each. Per sensor it measures and judges:
 
     rate and regularity   samples per second against the rig's claimed rate (the estimator's
                           packet period), the longest gap and the share of gaps over 3 periods
