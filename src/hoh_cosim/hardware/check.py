@@ -127,11 +127,12 @@ PLANAR = 0.1
 """Pushes whose third singular value is under a tenth of the first span a plane, not space."""
 PUSH_GAIN = (0.5, 1.5)
 """The probe's push over the wrist's within 0.5-1.5: the housing's gains (σ 0.15) and stiffening."""
-MAP_RESIDUAL_N = 1.5
+MAP_RESIDUAL_N = 2.0
 """[N] RMS the online map's features may leave: no map of m corrects the housing's play (its
 hysteresis), which leaves about the play's width per axis; at the seed's widest play, 0.8 N on
-every axis (`HousingParams.play_N`), that is √3 · 0.8 ≈ 1.4 N. More is a housing the online map
-(`control.probe_correction`, reference σ 0.5 N) cannot follow."""
+every axis (`HousingParams.play_N`), that is √3 · 0.8 ≈ 1.4 N, and the two streams aligned by their
+receipt times add up to a push's slope (24 N/s at most) times the FSE103's 20 ms period, 0.5 N.
+More is a housing the online map (`control.probe_correction`, reference σ 0.5 N) cannot follow."""
 SMOOTH_S = 0.1
 """[s] The wrist's reference for the pushes is averaged over 0.1 s: its noise (0.3 N per axis, the
 seed's) falls fourfold and a 2 s push changes by under 0.01 N from it."""
