@@ -128,6 +128,17 @@ class _PacketSensor:
     clock: PacketClock
     params: Any
 
+    def __init__(self, params: Any, rng: np.random.Generator | None = None) -> None:
+        """The parameters, the generator (seeded 0 when none is given), the packet clock at the
+        parameters' rate and latency, then `reset()`."""
+        self.params = params
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.clock = PacketClock(self.params.rate_hz, self.params.latency_s)
+        self.reset()
+
+    def reset(self) -> None:
+        raise NotImplementedError
+
     def retune(self, params: Any) -> None:
         """New parameters while running: a dropout (`connected`), an offset jump, other noise."""
         self.params = params
@@ -371,11 +382,9 @@ class FSE103Sensor(_PacketSensor):
     def __init__(
         self, params: FSE103Params | None = None, rng: np.random.Generator | None = None
     ) -> None:
-        self.params = params or FSE103Params()
-        self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.housing = housing_characterisation(self.params.housing)
-        self.clock = PacketClock(self.params.rate_hz, self.params.latency_s)
-        self.reset()
+        params = params or FSE103Params()
+        self.housing = housing_characterisation(params.housing)
+        super().__init__(params, rng)
 
     def reset(self) -> None:
         self.clock.reset()

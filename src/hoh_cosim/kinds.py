@@ -18,6 +18,7 @@ from hoh_cosim.control.impedance import (
 from hoh_cosim.control.sequencer import PoseSequencer, SequencerParams
 from plant_models.breathing import Breathing, BreathingParams
 from plant_models.freehand import FreehandParams, FreehandProbe
+from plant_models.loadcell import LoadCellParams, LoadCellSensor
 from plant_models.operator import Operator, OperatorParams
 from plant_models.panda import PandaParams, PandaPlant
 from plant_models.plant import Plant, PlantParams
@@ -77,6 +78,13 @@ KINDS: dict[str, ComponentKind] = {
             FSE103Params,
             "hoh_fse103",
             "Variense FSE103 probe force sensor in its housing",
+        ),
+        ComponentKind(
+            "loadcell",
+            LoadCellSensor,
+            LoadCellParams,
+            "hoh_loadcell",
+            "Honeywell Model 31 probe load cell, INA125P and a 10-bit ADC (1 axis)",
         ),
         ComponentKind(
             "estimator",

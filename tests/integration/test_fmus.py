@@ -114,7 +114,7 @@ def test_model_description_matches_block(fmus: dict[str, Path], kind: str) -> No
             assert str(variable.start).lower() == str(leaf.value).lower(), name
 
 
-@pytest.mark.parametrize("kind", ["ft150", "fse103", "operator", "breathing"])
+@pytest.mark.parametrize("kind", ["ft150", "fse103", "loadcell", "operator", "breathing"])
 def test_random_block_has_integer_seed(fmus: dict[str, Path], kind: str) -> None:
     assert KINDS[kind].random
     md = read_model_description(str(fmus[kind]))
@@ -150,6 +150,8 @@ START_VALUES: dict[str, dict[str, Any]] = {
     },
     "ft150": {"seed": 5, **_port("wrench_S_true", [1.0, -2.0, 3.0, 0.1, -0.2, 0.3])},
     "fse103": {"seed": 11, **_port("force_P_true", [0.5, -0.2, 4.0])},
+    # a compression of 8 N along the cell's axis (-z_L), with a side load the cell must not see
+    "loadcell": {"seed": 13, **_port("force_P_true", [1.5, -0.7, -8.0])},
     "estimator": {
         **_port("wrench_S", [1.0, -2.0, 3.0, 0.1, -0.2, 0.3]),
         **_port("force_P", [0.5, -0.2, 4.0]),

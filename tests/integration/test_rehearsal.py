@@ -580,16 +580,17 @@ def test_hw_rehearse_with_the_clinical_preset_checks_holds_recovers_and_gives_ba
     from hoh_cosim.control.guidance.modes import Mode
     from hoh_cosim.control.supervisor import STOP_FLAGS, Status
 
-    log_path = tmp_path / "clinical.mcap"
     command = [
         *("hw", "rehearse", "--preset", "clinical", "--task", "view", "--breathing", "10"),
         *("--let-go", "6+8", "--away", "25@11/0.05", "--seconds", "40"),
-        *("--rebias-samples", "100", "--log", str(log_path)),
+        *("--rebias-samples", "100"),
     ]
     # a session the machine starved past the robot's watchdog was stopped, as it must be, and says
-    # so; it is run again once (a second starved run fails)
-    for _ in range(2):
-        status = main(command)
+    # so; it is run again once, into a log of its own (a log is never overwritten; a second
+    # starved run fails)
+    for attempt in range(2):
+        log_path = tmp_path / f"clinical-{attempt}.mcap"
+        status = main([*command, "--log", str(log_path)])
         out = capsys.readouterr().out
         if "starved" not in out:
             break

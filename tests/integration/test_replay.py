@@ -118,6 +118,10 @@ def make_log(path: Path, *, rows: int, parameters: bool) -> Path:
 # --- the recording ----------------------------------------------------------------------------
 
 
+MACHINE_EVENTS = ("remeasure", "starved")
+"""The events a busy machine adds to a clean session: its timing, not the session's."""
+
+
 def test_the_rehearsal_recorded_a_whole_clean_session(rehearsal, log):
     """The recording the other tests replay. (A real-time session: on a machine too busy to keep
     500 Hz it may end early on a stale stream; the other tests then replay what was recorded.)"""
@@ -128,7 +132,11 @@ def test_the_rehearsal_recorded_a_whole_clean_session(rehearsal, log):
     assert session.complete is True
     assert len(session.messages["/command"]) == CYCLES
     events = [e["event"] for e in session.messages["/events"]]
-    assert events == ["rebias", "parameters", "mode", "end"]  # the mode: guiding once rebiased
+    # the rebias, the parameters, the mode (guiding once rebiased), the end; a busy machine may
+    # add what it did to the session's timing (a rate measured again at the rebias, a starved
+    # stream), nothing else
+    told = [e for e in events if e not in MACHINE_EVENTS]
+    assert told == ["rebias", "parameters", "mode", "end"], events
 
 
 # --- replaying as recorded ------------------------------------------------------------------------

@@ -44,6 +44,7 @@ SHORT = {
     ],
     "contact_scan": ["--duration", "10"],
     "contact_scan_fixture": ["--duration", "10"],
+    "contact_scan_loadcell": ["--duration", "10"],
     "contact_scan_online": [
         "--duration",
         "13",

@@ -484,7 +484,7 @@ def test_an_unknown_key_in_robot_lists_the_known_ones(tmp_path):
     ("section", "key", "known"),
     [
         ("ft150", "adress", {"host", "port", "zero_on_start"}),
-        ("probe", "baud", {"device", "framing", "byte_order", "baudrate"}),
+        ("probe", "baud", {"sensor", "device", "framing", "byte_order", "baudrate"}),
         (
             "rebias",
             "tolerance",
@@ -681,3 +681,46 @@ def test_speedl_takes_the_braking_a_only_for_a_command_to_rest():
     assert speedl_acceleration(moving, 1.0, 10.0) == 1.0  # never faster away from rest
     assert speedl_acceleration(rest, 1.0, 0.0) == 1.0  # not braking: the rig's own
     assert speedl_acceleration(rest, 12.0, 10.0) == 12.0
+
+
+# --- the probe sensor: the FSE103, the load cell or none -----------------------------------------
+
+
+def test_a_load_cell_brings_its_mounting_its_rate_and_the_wrists_part_across_the_axis(tmp_path):
+    from hoh_cosim.control.loadcell import LINE_RATE_HZ, R_SL_SEED
+
+    path = write(tmp_path, "robot: {host: h}\nprobe: {sensor: loadcell, device: /dev/ttyACM0}\n")
+    config = load_config(path)
+    assert config.probe is not None
+    assert config.probe.sensor == "loadcell"
+    np.testing.assert_array_equal(config.estimator.R_SP, R_SL_SEED)
+    assert config.estimator.probe_packet_period_s == pytest.approx(1.0 / LINE_RATE_HZ)
+    assert config.controller.probe_period_s == pytest.approx(1.0 / LINE_RATE_HZ)
+    assert config.estimator.probe_correction.across_from_wrist_s > 0.0
+    # the rig's own value stands
+    path = write(
+        tmp_path,
+        "robot: {host: h}\nprobe: {sensor: loadcell, device: /dev/ttyACM0}\n"
+        "estimator: {probe_correction: {across_from_wrist_s: 1.5}}\n",
+    )
+    assert load_config(path).estimator.probe_correction.across_from_wrist_s == 1.5
+
+
+def test_probe_sensor_on_the_command_line_replaces_the_files(tmp_path):
+    path = write(tmp_path, "robot: {host: h}\nprobe: {device: /dev/ttyACM0}\n")
+    assert load_config(path).probe.sensor == "fse103"
+    assert load_config(path, probe_sensor="loadcell").probe.sensor == "loadcell"
+    config = load_config(path, probe_sensor="none")
+    assert config.probe is None
+    assert config.estimator.use_probe is False
+    with pytest.raises(
+        ConfigError, match=r"--probe-sensor: expected one of fse103, loadcell, none"
+    ):
+        load_config(path, probe_sensor="honeywell")
+
+
+def test_the_fse103s_framing_on_a_load_cell_is_refused(tmp_path):
+    path = write(
+        tmp_path, "robot: {host: h}\nprobe: {sensor: loadcell, device: /dev/x, framing: seed18}\n"
+    )
+    assert rejection(path) == f"{path}: probe.framing: is the FSE103's; the load cell has none"

@@ -134,6 +134,41 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_probe_sensor(parser: argparse.ArgumentParser, default: str) -> None:
+    from hoh_cosim.control.cycle import PROBE_SENSORS
+
+    parser.add_argument(
+        "--probe-sensor",
+        choices=PROBE_SENSORS,
+        default=None,
+        help="the probe sensor: the Variense FSE103, the Honeywell Model 31 load cell on its "
+        f"Arduino, or none (default: {default})",
+    )
+
+
+def _loadcell_setting(text: str) -> tuple[str, str]:
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(
+            f"expected PARAM=VALUE, e.g. saturated=true or zero_drift_N_per_min=0.5, got {text!r}"
+        )
+    return name, value
+
+
+def _add_loadcell_settings(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--loadcell",
+        dest="loadcell",
+        action="append",
+        default=[],
+        type=_loadcell_setting,
+        metavar="PARAM=VALUE",
+        help="a parameter of the emulated load cell (with --probe-sensor loadcell; repeatable), "
+        "its faults among them: saturated=true (the seed's cell), open_circuit=true, "
+        "zero_drift_N_per_min=RATE (default: a sound cell)",
+    )
+
+
 def _add_preset(parser: argparse.ArgumentParser, default: str) -> None:
     from hoh_cosim.commands.cosim import add_preset_option
 
@@ -177,6 +212,7 @@ def add_commands(sub: Any) -> None:
         help="the session log (default: in the config's log_dir, named by date and time)",
     )
     _add_preset(run, "the config's preset, else " + _default_preset())
+    _add_probe_sensor(run, "the config's probe.sensor, fse103 if it names none")
     _add_block_overrides(run)
     add_view_options(run, "the session")
 
@@ -334,6 +370,8 @@ def add_commands(sub: Any) -> None:
     _add_rt_priority(rehearse, "the loop")
     add_view_options(rehearse, "the session")
     _add_preset(rehearse, _default_preset())
+    _add_probe_sensor(rehearse, "fse103")
+    _add_loadcell_settings(rehearse)
     rehearse.add_argument(
         "--set",
         dest="overrides",
@@ -430,6 +468,8 @@ def add_commands(sub: Any) -> None:
         help="what the emulated operator's hand does from --task-start (default: off, nobody "
         "touches the handle)",
     )
+    _add_probe_sensor(emulate, "fse103")
+    _add_loadcell_settings(emulate)
     emulate.add_argument(
         "--task-start",
         type=float,
@@ -642,7 +682,7 @@ def _hw_run(args: argparse.Namespace) -> int:
     from hoh_cosim.hardware.ft150 import zero_sensor
     from hoh_cosim.hardware.isolation import in_child
 
-    config = load_config(args.config, args.overrides, args.preset)
+    config = load_config(args.config, args.overrides, args.preset, args.probe_sensor)
     log_path = Path(args.log) if args.log else config.log_dir / f"session-{_stamp()}.mcap"
     _check_log(log_path, "--log" if args.log else f"{config.path}: log_dir")
     if config.calibration is None:
@@ -700,8 +740,8 @@ def _session(
     view: argparse.Namespace | None = None,
 ) -> int:
     """`hw run`'s session, in the child process of `in_child`."""
-    from hoh_cosim.hardware.fse103 import FSE103Port
     from hoh_cosim.hardware.ft150 import FT150Stream
+    from hoh_cosim.hardware.probe_port import probe_port
     from hoh_cosim.hardware.robot import RtdeRobot
     from hoh_cosim.hardware.runner import Runner
     from hoh_cosim.hardware.session_log import SessionLog
@@ -712,14 +752,7 @@ def _session(
         watchdog_hz=config.robot.watchdog_hz,
     )
     ft = FT150Stream(config.ft150.host, config.ft150.port)
-    probe = None
-    if config.probe is not None:
-        probe = FSE103Port(
-            config.probe.device,
-            baudrate=config.probe.baudrate,
-            framing=config.probe.framing,
-            byte_order=config.probe.byte_order,
-        )
+    probe = None if config.probe is None else probe_port(config.probe)
     metadata = {
         "kind": "session",
         "config": str(config.path),
@@ -831,6 +864,20 @@ def _rehearsal_params(overrides: list[str], preset: Any) -> tuple[Any, Any]:
     return params["estimator"], params["controller"]
 
 
+def _loadcell_params(settings: list[tuple[str, str]], probe_sensor: str) -> Any:
+    """The emulated load cell's parameters with `--loadcell` settings."""
+    from hoh_cosim.params import override
+    from hoh_cosim.yamlfile import parse_value
+    from plant_models.loadcell import LoadCellParams
+
+    params = LoadCellParams()
+    if settings and probe_sensor != "loadcell":
+        raise ConfigError(f"--loadcell: needs --probe-sensor loadcell, got {probe_sensor}")
+    for name, value in settings:
+        params = override(params, name, parse_value(f"{name}={value}", value), "--loadcell")
+    return params
+
+
 def _hw_rehearse(args: argparse.Namespace) -> int:
     from hoh_cosim.rehearsal.rehearse import Rehearsal, rehearse
 
@@ -858,7 +905,10 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
     let_go, retake = args.let_go or (0.0, 0.0)
     preset = load_preset(args.preset or DEFAULT_PRESET)
     estimator, controller = _rehearsal_params(args.overrides, preset)
+    probe_sensor = args.probe_sensor or "fse103"
     setup = Rehearsal(
+        probe_sensor=probe_sensor,
+        loadcell=_loadcell_params(args.loadcell, probe_sensor),
         seconds=args.seconds,
         log_path=log_path,
         task=args.task,
@@ -887,7 +937,8 @@ def _hw_rehearse(args: argparse.Namespace) -> int:
         if feed is not None:
             feed.close()
         raise
-    print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
+    if probe_sensor == "fse103":
+        print(f"FSE103 framing {result.probe_framing}, byte order {result.probe_byte_order}")
     status = _report(result.session, log_path)
     if feed is not None:
         _end_view(feed, url, args.record_view)
@@ -991,6 +1042,8 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         phantom_below_m=0.03 if args.task in CONTACT_TASKS else None,
         ft_host=args.host,
         ft_port=args.ft_port,
+        probe_sensor=args.probe_sensor or "fse103",
+        loadcell=_loadcell_params(args.loadcell, args.probe_sensor or "fse103"),
     )
     with RehearsalWorld(setup) as world:
         try:
@@ -1005,7 +1058,9 @@ def _hw_emulate(args: argparse.Namespace) -> int:
                 flush=True,
             )
             print(f"FT-150 stream on {args.host}:{world.ft_port}", flush=True)
-            print(f"FSE103 on {world.pty_name}", flush=True)
+            probe = {"fse103": "FSE103", "loadcell": "load cell (Arduino)"}.get(setup.probe_sensor)
+            if probe is not None:
+                print(f"{probe} on {world.pty_name}", flush=True)
             print("ready" + ("" if args.seconds else " (Ctrl-C ends)"), flush=True)
             deadline = None if args.seconds is None else time.monotonic() + args.seconds
             while deadline is None or time.monotonic() < deadline:

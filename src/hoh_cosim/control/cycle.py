@@ -34,6 +34,7 @@ from hoh_cosim.errors import ConfigError
 __all__ = [
     "FOLLOW_GAP_S",
     "MODE_GAP_S",
+    "PROBE_SENSORS",
     "ControlBlocks",
     "Cycle",
     "Event",
@@ -48,6 +49,10 @@ the mode it ended in (a contact's edge that flickers, a stale stream's gaps)."""
 FOLLOW_GAP_S = 4.0
 """[s] The follow's announcements are at least this far apart: about a breath (the follow's own
 `level_s`), which it may begin and end with."""
+
+PROBE_SENSORS = ("fse103", "loadcell", "none")
+"""The probe sensors a scenario (`probe_sensor`) and a rig (`probe.sensor`, `--probe-sensor`) may
+name: the Variense FSE103, the Honeywell Model 31 load cell, or none."""
 
 
 @dataclass(frozen=True)

@@ -30,8 +30,9 @@ Two implementations, one behaviour:
 on take the pure path, e.g. to check a result against the reference.
 
 The kernels are compiled once per machine and cached (`cache=True`: next to this file, or in
-numba's user cache when the package directory is read-only, or in `NUMBA_CACHE_DIR`); a fresh
-process loads them from the cache. `warm_up()` loads (or compiles) them now, so that a real-time loop
+numba's user cache when the package directory is read-only, or in `NUMBA_CACHE_DIR`; inside an
+unpacked FMU by their source's content, `hoh_cosim.control.jit`); a fresh process loads them from
+the cache. `warm_up()` loads (or compiles) them now, so that a real-time loop
 never waits for it.
 """
 

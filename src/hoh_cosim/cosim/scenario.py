@@ -10,6 +10,7 @@
     dt_s: 0.001                      # the master's tick
     seed: 7                          # every random source derives from it
     metrics: circles                 # which metrics and plots
+    probe_sensor: fse103             # or loadcell, or none (hoh_cosim.cosim.probe_sensor)
     components:                      # stepped in this order, each every `every` ticks
       operator: {params: {task: circle, start_s: 3.0}}
       plant: {}
@@ -45,6 +46,7 @@ import numpy as np
 
 from hoh_cosim.control.block import Port
 from hoh_cosim.control.cycle import SensorSetup
+from hoh_cosim.cosim.probe_sensor import with_probe_sensor
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.kinds import KINDS, ComponentKind, input_starts
 from hoh_cosim.params import from_mapping, leaves, override
@@ -90,6 +92,7 @@ _TOP_KEYS = (
     "dt_s",
     "seed",
     "metrics",
+    "probe_sensor",
     "components",
     "connections",
     "inputs",
@@ -290,7 +293,7 @@ def load_scenario(
     path = Path(path)
     w = Where(path)
     raw = _read_raw(path, ())
-    raw = w.mapping(raw, _TOP_KEYS, "")
+    raw = with_probe_sensor(w.mapping(raw, _TOP_KEYS, ""), w)
     for key in ("name", "duration_s", "components"):
         if key not in raw:
             raise w.error(key, "missing")

@@ -93,7 +93,7 @@ def default_cache_dir() -> Path:
 
 def fmu_name(kind: str) -> str:
     """The FMU's model identifier: the entry script's class name, e.g. HohEstimator."""
-    special = {"ft150": "FT150", "fse103": "FSE103"}
+    special = {"ft150": "FT150", "fse103": "FSE103", "loadcell": "LoadCell"}
     return "Hoh" + special.get(kind, "".join(part.capitalize() for part in kind.split("_")))
 
 

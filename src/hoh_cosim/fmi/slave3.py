@@ -58,6 +58,7 @@ from pythonfmu3.variables import Boolean, Float64, Int32, String
 
 from hoh_cosim.control.block import copy_new_outputs, make_block, variable_step
 from hoh_cosim.errors import ConfigError
+from hoh_cosim.fmi import exit_fix
 from hoh_cosim.fmi.slave import (
     INPUT_STARTS,
     PARAMETERS,
@@ -100,6 +101,10 @@ class BlockSlave3(_PythonFmu3Slave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        # pythonfmu3's library keeps its interpreter state as pythonfmu 0.7's does (a static
+        # shared_ptr reset again by the library's destructor): the same double release at unload
+        # or exit, the same cure (hoh_cosim.fmi.exit_fix)
+        exit_fix.protect_host()
         cls = type(self)
         self.description = (cls.block.__doc__ or cls.block.__name__).strip().splitlines()[0]
         self.specs = block_interface(

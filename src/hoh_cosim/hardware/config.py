@@ -12,9 +12,11 @@
       port: 63351
       zero_on_start: false        # also send SET ZRO to port 63350 before the rebias
     probe:                        # or `probe: null` without a probe sensor
+      sensor: fse103              # or loadcell (the Honeywell Model 31 behind its Arduino)
       device: /dev/ttyACM0
-      framing: auto               # seed18, guide20 or auto
-      byte_order: auto            # little, big or auto
+      framing: auto               # FSE103: seed18, guide20 or auto
+      byte_order: auto            # FSE103: little, big or auto
+      baudrate: 115200
     calibration: calibration.json # from `hoh-cosim hw calibrate` (path from this file)
     rebias:
       samples: 500                # averaged while the robot holds still (seed 3.B.1)
@@ -47,9 +49,10 @@ from typing import Any
 import numpy as np
 
 from hoh_cosim.control.controller import ControllerParams
-from hoh_cosim.control.cycle import SensorSetup
+from hoh_cosim.control.cycle import PROBE_SENSORS, SensorSetup
 from hoh_cosim.control.estimator import EstimatorParams
 from hoh_cosim.control.frames import rotvec_to_matrix
+from hoh_cosim.control.loadcell import estimator_defaults
 from hoh_cosim.control.vectors import Rot3
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import from_mapping, override
@@ -92,6 +95,7 @@ class ProbeConfig:
     framing: str = "auto"
     byte_order: str = "auto"
     baudrate: int = 115200
+    sensor: str = "fse103"  # or "loadcell"
 
 
 @dataclass(frozen=True)
@@ -167,11 +171,15 @@ def with_overrides(params: dict[str, Any], overrides: Sequence[str]) -> dict[str
 
 
 def load_config(
-    path: str | Path, overrides: Sequence[str] = (), preset: str | Path | None = None
+    path: str | Path,
+    overrides: Sequence[str] = (),
+    preset: str | Path | None = None,
+    probe_sensor: str | None = None,
 ) -> HardwareConfig:
     """Read and check a rig's configuration; `overrides` are `estimator.x=v` / `controller.x=v`
     strings (`--set`), `preset` a preset's name or file (`--preset`; default: the file's `preset`,
-    else `hoh_cosim.presets.DEFAULT_PRESET`), under the file's estimator and controller sections."""
+    else `hoh_cosim.presets.DEFAULT_PRESET`), under the file's estimator and controller sections;
+    `probe_sensor` (`--probe-sensor`: fse103, loadcell or none) the file's `probe.sensor`."""
     path = Path(path)
     w = Where(path)
     raw = w.mapping(read_yaml(path) or {}, _TOP, "")
@@ -219,11 +227,23 @@ def load_config(
     )
 
     probe_config = None
-    if "probe" not in raw or raw["probe"] is not None:
-        probe = _section(w, raw, "probe", ("device", "framing", "byte_order", "baudrate"))
+    if probe_sensor not in (None, *PROBE_SENSORS):
+        raise ConfigError(
+            f"--probe-sensor: expected one of {', '.join(PROBE_SENSORS)}, got {probe_sensor!r}"
+        )
+    if probe_sensor != "none" and ("probe" not in raw or raw["probe"] is not None):
+        probe = _section(w, raw, "probe", ("sensor", "device", "framing", "byte_order", "baudrate"))
         if "device" not in probe:
             raise w.error("probe.device", "missing (or write `probe: null` for no probe sensor)")
+        sensor = probe_sensor or w.string(
+            probe.get("sensor", "fse103"), "probe.sensor", choices=PROBE_SENSORS[:2]
+        )
+        if sensor == "loadcell":
+            for key in ("framing", "byte_order"):
+                if key in probe:
+                    raise w.error(f"probe.{key}", "is the FSE103's; the load cell has none")
         probe_config = ProbeConfig(
+            sensor=sensor,
             device=w.string(probe["device"], "probe.device"),
             framing=w.string(
                 probe.get("framing", "auto"), "probe.framing", choices=("auto", "seed18", "guide20")
@@ -268,8 +288,15 @@ def load_config(
         if not from_file:  # the command line's: no file to name
             raise
         raise ConfigError(f"{path}: {exc}") from None
+    estimator_raw = raw.get("estimator") or {}
+    if (
+        probe_config is not None
+        and probe_config.sensor == "loadcell"
+        and isinstance(estimator_raw, dict)
+    ):
+        estimator_raw = estimator_defaults(estimator_raw)  # its mounting, rate, the wrist's help
     try:
-        estimator = from_mapping(chosen.estimator, raw.get("estimator") or {}, "estimator")
+        estimator = from_mapping(chosen.estimator, estimator_raw, "estimator")
         controller = from_mapping(chosen.controller, raw.get("controller") or {}, "controller")
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None

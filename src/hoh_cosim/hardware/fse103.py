@@ -17,10 +17,8 @@ searching for a delimiter. The device takes single-byte commands: `f` forces, `r
 
 from __future__ import annotations
 
-import contextlib
 import math
 import struct
-import threading
 from dataclasses import dataclass
 from itertools import product
 from typing import Any
@@ -28,9 +26,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hoh_cosim.control.vectors import Vec, as_scalar, frozen
-from hoh_cosim.errors import ConfigError, RunError
-from hoh_cosim.hardware.streams import Mailbox, ReaderThread, Sample, now
+from hoh_cosim.control.vectors import Vec, frozen
+from hoh_cosim.errors import ConfigError
+from hoh_cosim.hardware.serial_source import SerialSource
+from hoh_cosim.hardware.streams import Sample, now
 
 __all__ = [
     "BYTE_ORDERS",
@@ -365,7 +364,7 @@ class FSE103Parser:
         return ProbeFrame(np.array(forces), timestamp, kind)
 
 
-class FSE103Port:
+class FSE103Port(SerialSource):
     """The FSE103 on a serial port (or a pyserial URL such as `loop://`), read by a thread.
 
     `start()` opens the port in a `ReaderThread`, which feeds every chunk read to the parser and
@@ -388,145 +387,28 @@ class FSE103Port:
     setting of it is that far off)."""
 
     def __init__(
-        self,
-        device: str,
-        *,
-        baudrate: int = 115200,
-        framing: str = "auto",
-        byte_order: str = "auto",
-        mailbox: Mailbox | None = None,
-        reconnect: bool = True,
-        retry_s: float = 0.5,
-        timeout_s: float = 0.1,
+        self, device: str, *, framing: str = "auto", byte_order: str = "auto", **transport: Any
     ) -> None:
-        if not isinstance(device, str) or not device:
-            raise ConfigError(f"device: expected a port name or pyserial URL, got {device!r}")
-        if isinstance(baudrate, bool) or not isinstance(baudrate, int) or baudrate <= 0:
-            raise ConfigError(f"baudrate: expected a positive integer, got {baudrate!r}")
-        self.device = device
-        self.baudrate = baudrate
-        self.reconnect = reconnect
-        self.retry_s = as_scalar(retry_s, "retry_s", low=0.0)
-        self.timeout_s = as_scalar(timeout_s, "timeout_s", low=0.0, low_open=True)
+        """`transport`: `SerialSource`'s baudrate, mailbox, reconnect, retry_s, timeout_s."""
+        super().__init__(device, **transport)
         self._parser = FSE103Parser(framing, byte_order)
-        self._mailbox = mailbox if mailbox is not None else Mailbox()
         self.raw_frames = 0
         self._bad_reported = 0
-        self._serial: Any = None
-        # _lock guards the reference and short calls (write, cancel_read, close); _read_lock is held
-        # for a whole read, so the port is never closed under a read in progress.
-        self._lock = threading.Lock()
-        self._read_lock = threading.Lock()
-        self._thread: ReaderThread | None = None
 
     @property
     def parser(self) -> FSE103Parser:
         return self._parser
 
-    @property
-    def mailbox(self) -> Mailbox:
-        return self._mailbox
-
-    @property
-    def connected(self) -> bool:
-        return self._thread is not None and self._thread.connected.is_set()
-
     def describe(self) -> str:
         return f"FSE103 on {self.device}"
-
-    def start(self) -> None:
-        """Start reading in the background (a second call while running does nothing)."""
-        if self._thread is not None and self._thread.is_alive():
-            return
-        try:
-            import serial  # noqa: F401
-        except ImportError:
-            raise RunError(
-                f"{self.describe()}: needs pyserial (pip install 'hoh-cosim[hardware]')"
-            ) from None
-        self._thread = ReaderThread(
-            self.describe(),
-            self._mailbox,
-            self._connect,
-            self._read,
-            self._handle,
-            self._close,
-            reconnect=self.reconnect,
-            retry_s=self.retry_s,
-        )
-        self._thread.start()
-
-    def stop(self, timeout_s: float = 2.0) -> None:
-        """Stop reading and close the port; returns within about `timeout_s`."""
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.stop(timeout_s)
-        self._close()
 
     def zero(self) -> None:
         """Ask the sensor to zero itself (the `z` command)."""
         self._send(COMMAND_ZERO)
 
-    def _send(self, command: bytes) -> None:
-        import serial
-
-        with self._lock:
-            port = self._serial
-            if port is None:
-                raise RunError(f"{self.describe()}: not connected, cannot send {command!r}")
-            try:
-                port.write(command)
-            except (serial.SerialException, OSError) as exc:
-                raise RunError(f"{self.describe()}: cannot send {command!r}: {exc}") from None
-
     def __enter__(self) -> FSE103Port:
         self.start()
         return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.stop()
-
-    # The ReaderThread's callbacks.
-
-    def _connect(self) -> None:
-        import serial
-
-        try:
-            if "://" in self.device:
-                port = serial.serial_for_url(
-                    self.device,
-                    baudrate=self.baudrate,
-                    timeout=self.timeout_s,
-                    write_timeout=self.timeout_s,
-                )
-            else:
-                port = serial.Serial(
-                    self.device,
-                    self.baudrate,
-                    timeout=self.timeout_s,
-                    write_timeout=self.timeout_s,
-                )
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise ConnectionError(f"{self.describe()}: cannot open: {exc}") from None
-        if self._parser.pending_bytes:
-            self._mailbox.count_bad(1)  # the old connection ended inside a frame
-        self._parser.reset()
-        with self._lock:
-            self._serial = port
-
-    def _read(self) -> bytes | None:
-        import serial
-
-        with self._read_lock:
-            port = self._serial
-            if port is None:
-                raise ConnectionError(f"{self.describe()}: the port is closed")
-            try:
-                waiting = port.in_waiting
-                data = port.read(min(max(1, waiting), 4096))
-            except (serial.SerialException, OSError) as exc:
-                raise ConnectionError(f"{self.describe()}: connection lost: {exc}") from None
-        return data or None  # nothing within the timeout, or the read was cancelled by stop()
 
     def _handle(self, data: bytes) -> None:
         frames = self._parser.feed(data)
@@ -540,15 +422,3 @@ class FSE103Port:
                 )
             else:
                 self.raw_frames += 1
-
-    def _close(self) -> None:
-        with self._lock:
-            port = self._serial
-            if port is not None and hasattr(port, "cancel_read"):
-                with contextlib.suppress(OSError):
-                    port.cancel_read()  # wakes a read blocked in the reader thread
-        with self._read_lock, self._lock:
-            port, self._serial = self._serial, None
-            if port is not None:
-                with contextlib.suppress(OSError):
-                    port.close()

@@ -13,15 +13,17 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hoh_cosim.control.controller import ControllerParams
+from hoh_cosim.control.cycle import SensorSetup
 from hoh_cosim.control.estimator import EstimatorParams
 from hoh_cosim.control.gravity import GravityCalibration
+from hoh_cosim.control.loadcell import estimator_defaults
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.config import (
     FT150Config,
@@ -33,13 +35,16 @@ from hoh_cosim.hardware.config import (
 from hoh_cosim.hardware.feed import CycleObserver
 from hoh_cosim.hardware.fse103 import FSE103Port
 from hoh_cosim.hardware.ft150 import FT150Stream
+from hoh_cosim.hardware.probe_port import probe_port
 from hoh_cosim.hardware.robot import Robot, RtdeRobot
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import SessionLog
+from hoh_cosim.params import from_mapping
 from hoh_cosim.presets import Preset
 from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 from hoh_cosim.rehearsal.ur_controller import UrController
 from hoh_cosim.rehearsal.world import Fault, RehearsalWorld, WorldSetup
+from plant_models.loadcell import LoadCellParams
 
 __all__ = [
     "Rehearsal",
@@ -106,6 +111,12 @@ def rehearsal_config(
     preset: Preset | None = None,
 ) -> HardwareConfig:
     setup = world.setup
+    probe = None
+    if setup.probe_sensor != "none":
+        probe = ProbeConfig(device=world.pty_name, sensor=setup.probe_sensor)
+    estimator, controller = _with_probe_sensor(
+        setup.probe_sensor, estimator or EstimatorParams(), controller or ControllerParams()
+    )
     return HardwareConfig(
         path=Path("<rehearsal>"),
         robot=RobotConfig(
@@ -115,14 +126,31 @@ def rehearsal_config(
             realtime_priority=realtime_priority,
         ),
         ft150=FT150Config(host="127.0.0.1", port=world.ft_port),
-        probe=ProbeConfig(device=world.pty_name),
+        probe=probe,
         calibration=None,
         rebias=RebiasConfig(samples=rebias_samples),
-        estimator=estimator or EstimatorParams(),
-        controller=controller or ControllerParams(),
+        estimator=estimator,
+        controller=controller,
         log_dir=log_dir,
         preset=preset,
     )
+
+
+def _with_probe_sensor(
+    sensor: str, estimator: EstimatorParams, controller: ControllerParams
+) -> tuple[EstimatorParams, ControllerParams]:
+    """The blocks' parameters for the world's probe sensor. A load cell: its mounting and line
+    period are the world's (`estimator_defaults`), and the contact across the probe's axis comes
+    from the wrist unless the parameters already take it from there. None: no probe sensor."""
+    if sensor == "loadcell":
+        defaults = estimator_defaults({})
+        if estimator.probe_correction.across_from_wrist_s > 0.0:
+            del defaults["probe_correction"]
+        estimator = from_mapping(estimator, defaults, "estimator")
+    sensors = SensorSetup.of(estimator)
+    if sensor == "none":
+        sensors = dataclasses.replace(sensors, use_probe=False)
+    return sensors.apply(estimator, controller)
 
 
 @dataclass(frozen=True)
@@ -153,6 +181,8 @@ class Rehearsal:
     realtime_priority: int | None = LOOP_PRIORITY  # None: the default priority
     ur_host: str | None = None
     preset: Preset | None = None  # what `estimator` and `controller` came from, for the log
+    probe_sensor: str = "fse103"  # or loadcell, or none (WorldSetup)
+    loadcell: LoadCellParams = field(default_factory=LoadCellParams)  # its faults (WorldSetup)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "faults", tuple(self.faults))
@@ -194,6 +224,8 @@ def rehearse(
         away_m=setup.away_m,
         away_s=setup.away_s,
         away_time_s=setup.away_time_s,
+        probe_sensor=setup.probe_sensor,
+        loadcell=setup.loadcell,
     )
     announce("starting the rehearsal world")
     with RehearsalWorld(world_setup) as world:
@@ -208,7 +240,7 @@ def rehearse(
         )
         calibration = truth_calibration(world.truth)
         ft = FT150Stream(config.ft150.host, config.ft150.port)
-        probe = FSE103Port(config.probe.device, reconnect=False)  # type: ignore[union-attr]
+        probe = None if config.probe is None else probe_port(config.probe, reconnect=False)
         with contextlib.ExitStack() as stack:
             robot: Robot = world.robot()
             if setup.ur_host is not None:
@@ -230,7 +262,10 @@ def rehearse(
                 config, robot, ft, probe, calibration, log, announce=tell, observer=observer
             )
             session = runner.run(setup.seconds)
-    return RehearsalResult(session, setup.log_path, probe.parser.framing, probe.parser.byte_order)
+    framing = byte_order = None
+    if isinstance(probe, FSE103Port):
+        framing, byte_order = probe.parser.framing, probe.parser.byte_order
+    return RehearsalResult(session, setup.log_path, framing, byte_order)
 
 
 def _probe_check_s(estimator: EstimatorParams | None) -> float:
@@ -246,16 +281,16 @@ def _metadata(config: HardwareConfig, setup: WorldSetup) -> dict:
         "robot": config.robot.host,
         "period_s": 1.0 / setup.robot_rate_hz,
         "R_TS": config.robot.R_TS.tolist(),
-        "world": {
-            field.name: _world_value(setup, field.name) for field in dataclasses.fields(setup)
-        },
+        "world": {f.name: _world_value(setup, f.name) for f in dataclasses.fields(setup)},
     }
 
 
 def _world_value(setup: WorldSetup, name: str) -> Any:
-    """A world parameter as the log's metadata keeps it (plain values)."""
+    """A world parameter as the log's metadata keeps it: plain values, the faults as pairs, the
+    load cell's parameters and the planted faults as mappings."""
     if name == "faults":
         return [(f.at_s, f.kind) for f in setup.faults]
-    if name == "planted":
-        return dataclasses.asdict(setup.planted)
-    return getattr(setup, name)
+    value = getattr(setup, name)
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return dataclasses.asdict(value)
+    return value

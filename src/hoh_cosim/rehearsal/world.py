@@ -6,7 +6,10 @@ and advances the simulated world of this package in real time, 1 ms a tick:
 - the arm under speedL, the tool, the phantom and the operator's hand (`Plant`, `Operator`);
 - an FT-150 stream server on loopback: the FT-150 model's packets, as the URCap's daemon writes
   them, to one TCP client at a time (a second client is turned away);
-- an FSE103 on a pseudo-terminal in raw mode: the FSE103 model's packets as serial frames;
+- an FSE103 on a pseudo-terminal in raw mode: the FSE103 model's packets as serial frames; or
+  instead (`WorldSetup.probe_sensor`) the load cell's Arduino there, the load cell model's readings
+  as its ASCII lines (`hoh_cosim.hardware.loadcell`), its faults the model's parameters
+  (`WorldSetup.loadcell`: saturated, open circuit, a drifting zero); or no probe sensor;
 - the robot's side of `SimulatedRobot`: state out and commands in through shared memory, with the UR
   controller's habits: the watchdog (no kick for 1/watchdog_hz s: the program stops), speedStop,
   stopScript, a protective stop.
@@ -33,7 +36,9 @@ from typing import Any
 
 import numpy as np
 
+from hoh_cosim.control.cycle import PROBE_SENSORS
 from hoh_cosim.control.frames import matrix_to_rotvec
+from hoh_cosim.control.loadcell import R_SL_SEED
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pacer, RobotState
@@ -42,10 +47,12 @@ from hoh_cosim.rehearsal.planted import Planted
 from hoh_cosim.rehearsal.priorities import HARDWARE_PRIORITY
 from plant_models.arm import ArmParams
 from plant_models.breathing import Breathing, BreathingParams
+from plant_models.loadcell import LoadCellParams, LoadCellSensor
 from plant_models.operator import TASKS, Operator, OperatorParams
 from plant_models.plant import Plant, PlantParams
 from plant_models.sensors import FSE103Params, FSE103Sensor, FT150Params, FT150Sensor
 from plant_models.tissue import PhantomParams
+from plant_models.tool import ToolModel
 
 __all__ = [
     "FAULTS",
@@ -144,11 +151,27 @@ class WorldSetup:
     away_time_s: float = 0.3
     ft_host: str = "127.0.0.1"  # where the FT-150 stream listens
     ft_port: int = 0  # 0: any free port (the URCap's daemon uses 63351)
+    # the probe sensor on the pseudo-terminal: fse103, loadcell (mounted as eq. 3 says) or none;
+    # the load cell's model parameters carry its faults (saturated, open_circuit,
+    # zero_drift_N_per_min)
+    probe_sensor: str = "fse103"
+    loadcell: LoadCellParams = field(default_factory=LoadCellParams)
     # sensor faults from the start, for `hw check --rehearse --fault` (rehearsal.planted)
     planted: Planted = field(default_factory=Planted)
     hand_seed: int | None = None  # the hand's draws (pushes, tremor) from it; None: its own
 
     def __post_init__(self) -> None:
+        if self.probe_sensor not in PROBE_SENSORS:
+            raise ConfigError(
+                f"probe_sensor: expected one of {', '.join(PROBE_SENSORS)}, "
+                f"got {self.probe_sensor!r}"
+            )
+        framing = [f.kind for f in self.faults if f.kind == "probe_framing"]
+        if framing and self.probe_sensor != "fse103":
+            raise ConfigError(
+                f"faults: probe_framing switches the FSE103's framing; the probe sensor is "
+                f"{self.probe_sensor}"
+            )
         if self.task not in TASKS:
             raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {self.task!r}")
         if self.breathing_m and self.phantom_below_m is None:
@@ -206,6 +229,7 @@ class _World:
     ) -> None:
         from hoh_cosim.hardware.fse103 import FRAMINGS, encode_frame
         from hoh_cosim.hardware.ft150 import encode_sample
+        from hoh_cosim.hardware.loadcell import encode_line
 
         self.setup = setup
         self.encode_sample, self.encode_frame = encode_sample, encode_frame
@@ -217,7 +241,10 @@ class _World:
             phantom = PhantomParams(
                 shape="plane", plane_point_B=[0.0, 0.0, float(tip[2]) - setup.phantom_below_m]
             )
-        self.plant = Plant(PlantParams(arm=arm, phantom=phantom))
+        tool = ToolModel()
+        if setup.probe_sensor == "loadcell":  # the plant's probe force in the cell's frame L
+            tool = dataclasses.replace(tool, R_SP=R_SL_SEED)
+        self.plant = Plant(PlantParams(arm=arm, tool=tool, phantom=phantom))
         start = _HELD if setup.task_start_s is None else setup.task_start_s
         # a view task taken again moves on to the next view (the touch that hands back)
         next_view = setup.retake_s + 1.0 if setup.task == "view" and setup.retake_s else 0.0
@@ -251,7 +278,14 @@ class _World:
         self._acceleration = np.zeros(1)  # speedL's a of the last command
         rng = np.random.default_rng(setup.seed)
         self.ft = FT150Sensor(FT150Params(rate_hz=setup.ft_rate_hz), rng=rng)
-        self.probe = FSE103Sensor(setup.planted.fse103_params(FSE103Params()), rng=rng)
+        self.probe: FSE103Sensor | LoadCellSensor | None = None
+        self.encode_line = encode_line
+        if setup.probe_sensor == "fse103":
+            self.probe = FSE103Sensor(setup.planted.fse103_params(FSE103Params()), rng=rng)
+        elif setup.probe_sensor == "loadcell":
+            self.probe = LoadCellSensor(setup.loadcell, rng=rng)
+        # the 40 N of force_spike as a compression of the cell (along -z_L), on the FSE103's z
+        self.spike_axis_P = np.array([0.0, 0.0, -1.0 if setup.probe_sensor == "loadcell" else 1.0])
         self.listener = socket.create_server((setup.ft_host, setup.ft_port))
         self.listener.setblocking(False)
         self.ft_port = self.listener.getsockname()[1]
@@ -515,19 +549,30 @@ class _World:
             if self.nan_next or self.ft_nan:
                 values, self.nan_next = np.full(6, math.nan), False
             self._send_ft(self.encode_sample(values))
-        before = self.probe.clock.delivered
+        if self.probe is not None:
+            self._probe_tick(t)
+
+    def _probe_tick(self, t: float) -> None:
+        probe_sensor = self.probe
+        assert probe_sensor is not None
+        before = probe_sensor.clock.delivered
         force = self.setup.planted.probe_force(self.outputs["force_P"])
-        force = force + np.array([0.0, 0.0, self.spike])
-        probe = self.probe.step(t, WORLD_DT, {"force_P_true": force})
-        if self.probe.clock.delivered != before:
-            self._send_probe(
-                self.encode_frame(
-                    probe["force_P"],
-                    int(1e3 * t) & 0xFFFFFFFF,
-                    framing=self.framing,
-                    byte_order=self.setup.probe_byte_order,
-                )
+        force = force + self.spike * self.spike_axis_P
+        probe = probe_sensor.step(t, WORLD_DT, {"force_P_true": force})
+        if probe_sensor.clock.delivered == before:
+            return
+        device_ms = int(1e3 * t) & 0xFFFFFFFF
+        if isinstance(probe_sensor, LoadCellSensor):
+            self._send_probe(self.encode_line(int(probe["count"][0]), device_ms))
+            return
+        self._send_probe(
+            self.encode_frame(
+                probe["force_P"],
+                device_ms,
+                framing=self.framing,
+                byte_order=self.setup.probe_byte_order,
             )
+        )
 
     def close(self) -> None:
         for closer in (
