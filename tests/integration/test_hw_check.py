@@ -55,7 +55,7 @@ def test_the_wrists_faults_are_named_and_refuse_a_session_unless_overridden(tmp_
     assert status == 0, out + err  # overridden by name
     line = next(line for line in out.splitlines() if line.startswith("FT-150"))
     assert line.startswith("FT-150: FAIL rate 50.0 Hz against 200 Hz ±20 %"), line
-    assert "Fx sign flipped: gain -1.0" in line
+    assert "Fx sign flipped: gain -" in line
     assert "Fy flat: σ 0 N at rest" in line
     assert line.endswith("(overridden)")
     assert report["session"] == "allowed"
@@ -87,6 +87,23 @@ def test_the_probe_sensors_faults_are_named_and_refuse_a_session(tmp_path, capsy
     assert report["refused_by"] == ["fse103"]
 
 
+@REAL_TIME
+def test_the_load_cell_passes_healthy_and_is_named_saturated_with_its_figure(tmp_path, capsys):
+    status, out, err, _ = _check(tmp_path, capsys, "--probe-sensor", "loadcell", "--seed", "3")
+    assert status == 0, out + err
+    assert "load cell: ok (rate " in out
+    status, out, err, report = _check(
+        tmp_path, capsys, "--probe-sensor", "loadcell", "--fault", "loadcell_saturated"
+    )
+    assert status == 1, out
+    line = next(line for line in out.splitlines() if line.startswith("load cell"))
+    assert line.startswith("load cell: FAIL saturated: pushes of "), line
+    counts = float(line.split("moved it ")[1].split(" counts")[0])
+    needed = float(line.split("against >= ")[1].split(" ")[0])
+    assert counts < needed / 2, line
+    assert report["refused_by"] == ["loadcell"]
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -96,7 +113,6 @@ def test_the_probe_sensors_faults_are_named_and_refuse_a_session(tmp_path, capsy
             ["--probe-sensor", "none", "--fault", "probe_frame_rotated"],
             "--fault probe_frame_rotated: needs --probe-sensor fse103, got none",
         ),
-        (["--probe-sensor", "loadcell"], "--probe-sensor loadcell: its driver and rehearsal"),
         (["--repeat", "-1"], "--repeat: expected N >= 1 healthy runs and no --fault, got -1"),
     ],
 )

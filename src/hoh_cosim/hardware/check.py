@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from hoh_cosim.control.cycle import PROBE_SENSORS
 from hoh_cosim.control.estimator import (
     FSE103_NOISE_MAX,
     FT150_NOISE_MAX_S,
@@ -46,6 +47,7 @@ from hoh_cosim.control.estimator import (
     NOISE_MAX_PER_SIGMA,
 )
 from hoh_cosim.control.gravity import ToolParams, tool_weight_wrench_S
+from hoh_cosim.control.loadcell import SEED_CHAIN
 from hoh_cosim.control.probe_correction import features
 from hoh_cosim.control.vectors import GRAVITY_B, Rot3, Vec
 from hoh_cosim.errors import ConfigError
@@ -76,9 +78,6 @@ __all__ = [
     "session_refusal",
 ]
 
-PROBE_SENSORS = ("fse103", "loadcell", "none")
-"""The probe sensors a check knows (`--probe-sensor`); each but none has its `PROBE_CHECKS` entry
-where its driver is in the build."""
 SENSORS = ("ft150", "fse103", "loadcell")
 """The sensors a verdict names (`--override`)."""
 
@@ -767,9 +766,18 @@ def check_loadcell(evidence: ProbeEvidence, claims: Claims, spec: LoadCellSpec) 
 
 ProbeCheck = Callable[[ProbeEvidence, Claims], SensorVerdict]
 
-PROBE_CHECKS: dict[str, ProbeCheck] = {"fse103": check_fse103}
-"""Per probe sensor, its check over what its stream delivered. The load cell's entry, where its
-model is in the build: `functools.partial(check_loadcell, spec=LoadCellSpec(counts_of=...))`."""
+SEED_LOADCELL = LoadCellSpec(
+    counts_of=lambda F_z: SEED_CHAIN.zero_count - SEED_CHAIN.counts_per_N * np.asarray(F_z),
+    adc_max=1023,
+    noise_N=0.0,  # the model's 2 mV is under half a count (0.064 N): judged by the pushes
+)
+"""The seed's chain (`control.loadcell.SEED_CHAIN`): its driver reports (0, 0, -compression)."""
+
+PROBE_CHECKS: dict[str, ProbeCheck] = {
+    "fse103": check_fse103,
+    "loadcell": lambda evidence, claims: check_loadcell(evidence, claims, SEED_LOADCELL),
+}
+"""Per probe sensor, its check over what its stream delivered."""
 
 
 # --- the whole check ------------------------------------------------------------------------------

@@ -227,11 +227,11 @@ def check_on_rig(
     RTDE, its FT-150 stream, its probe sensor; the rig's claims from its file and calibration.
     The operator is told on the terminal when to push the probe's tip."""
     from hoh_cosim.calibration import read_calibration
-    from hoh_cosim.hardware.fse103 import FSE103Port
     from hoh_cosim.hardware.ft150 import FT150Stream
+    from hoh_cosim.hardware.probe_port import probe_port
     from hoh_cosim.hardware.robot import RtdeRobot
 
-    rig_probe = "none" if config.probe is None else "fse103"
+    rig_probe = "none" if config.probe is None else config.probe.sensor
     if probe_sensor is not None and probe_sensor != rig_probe:
         raise ConfigError(
             f"--probe-sensor: {config.path} has probe sensor {rig_probe}, got {probe_sensor}"
@@ -252,15 +252,7 @@ def check_on_rig(
         watchdog_hz=config.robot.watchdog_hz,
     )
     ft = FT150Stream(config.ft150.host, config.ft150.port, mailbox=RecordingMailbox())
-    probe = None
-    if config.probe is not None:
-        probe = FSE103Port(
-            config.probe.device,
-            baudrate=config.probe.baudrate,
-            framing=config.probe.framing,
-            byte_order=config.probe.byte_order,
-            mailbox=RecordingMailbox(),
-        )
+    probe = None if config.probe is None else probe_port(config.probe, mailbox=RecordingMailbox())
     started = time.monotonic()
     record = record_check(
         robot,

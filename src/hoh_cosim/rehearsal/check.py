@@ -25,8 +25,8 @@ from typing import Any
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.check import PROBE_SENSORS, Claims, SensorVerdict, judge
 from hoh_cosim.hardware.check_run import REHEARSAL_PLAN, CheckPlan, RecordingMailbox, record_check
-from hoh_cosim.hardware.fse103 import FSE103Port
 from hoh_cosim.hardware.ft150 import FT150Stream
+from hoh_cosim.hardware.probe_port import probe_port
 from hoh_cosim.hardware.robot import Robot, RtdeRobot
 from hoh_cosim.rehearsal.planted import PLANTED, planted_world
 from hoh_cosim.rehearsal.rehearse import UR_SERIES, rehearsal_config, truth_calibration
@@ -37,18 +37,6 @@ __all__ = ["PUSHES_S", "CheckOutcome", "Tally", "rehearse_check", "tally"]
 PUSHES_S = 6.5
 """[s] The world's probe check: the hand pushes from 0.5 s after the check's call, three 2 s
 pushes (`plant_models.operator`'s push_s), within the plan's 7 s push window."""
-
-
-def _probe_port(probe_sensor: str, device: str) -> Any:
-    """The probe sensor's driver on the world's device, on a recording mailbox (None: none)."""
-    if probe_sensor == "none":
-        return None
-    if probe_sensor == "fse103":
-        return FSE103Port(device, reconnect=False, mailbox=RecordingMailbox())
-    raise ConfigError(
-        f"--probe-sensor {probe_sensor}: its driver and rehearsal world are not in this build "
-        f"(expected fse103 or none)"
-    )
 
 
 @dataclass
@@ -73,14 +61,13 @@ def rehearse_check(
             f"--probe-sensor: expected one of {', '.join(PROBE_SENSORS)}, got {probe_sensor!r}"
         )
     planted, changes = planted_world(faults, probe_sensor)
-    if probe_sensor not in ("fse103", "none"):
-        _probe_port(probe_sensor, "")  # refuses a probe sensor this build cannot emulate
     setup = WorldSetup(
         robot_rate_hz=robot_rate_hz,
         task="off",
         task_start_s=None,
         probe_check_s=PUSHES_S if probe_sensor != "none" else 0.0,
         seed=seed,
+        probe_sensor=probe_sensor,
         hand_seed=seed,  # the pushes differ from seed to seed, as the sensors' noise
         planted=planted,
         **changes,
@@ -95,7 +82,11 @@ def rehearse_check(
             tool=truth_calibration(world.truth).tool,
         )
         ft = FT150Stream(config.ft150.host, config.ft150.port, mailbox=RecordingMailbox())
-        probe = _probe_port(probe_sensor, world.pty_name)
+        probe = (
+            None
+            if config.probe is None
+            else probe_port(config.probe, reconnect=False, mailbox=RecordingMailbox())
+        )
         with contextlib.ExitStack() as stack:
             robot: Robot = world.robot()
             if ur_host is not None:

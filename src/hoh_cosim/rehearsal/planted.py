@@ -34,6 +34,7 @@ import numpy as np
 from hoh_cosim.control.frames import rotvec_to_matrix
 from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError
+from plant_models.loadcell import LoadCellParams
 from plant_models.sensors import HousingParams
 
 __all__ = ["PLANTED", "Planted", "PlantedFault", "planted_world"]
@@ -124,5 +125,7 @@ def planted_world(faults: Sequence[str], probe_sensor: str) -> tuple[Planted, di
         fields.update(entry.planted)
         if entry.ft_rate_hz is not None:
             changes["ft_rate_hz"] = entry.ft_rate_hz
-        changes.update(entry.loadcell)
+        if entry.loadcell:
+            cell = changes.get("loadcell", LoadCellParams())
+            changes["loadcell"] = replace(cell, **entry.loadcell)
     return Planted(**fields), changes
