@@ -9,6 +9,8 @@
                           [--breathing MM] [--let-go S+D] [--away MM@S[/D]] [--preset NAME|FILE]
                           [--view] [--record-view FILE.rrd] [--view-port PORT]
     hoh-cosim hw emulate [--host 127.0.0.1] [--series e|cb3] [--seconds N] [--allow-remote]
+    hoh-cosim hw check [CONFIG.yaml] [--rehearse] [--probe-sensor fse103|loadcell|none]
+                       [--fault NAME ...] [--seed S] [--repeat N] [--override SENSOR ...] [--out FILE]
     hoh-cosim hw campaign [--runs N] [--seed S] [--workers W] [--out DIR] [--kinds K,K,...]
     hoh-cosim replay LOG.mcap [--preset NAME|FILE] [--set block.parameter=value ...] [--out DIR]
                               [--view] [--record-view FILE.rrd] [--view-port PORT]
@@ -382,6 +384,8 @@ def add_commands(sub: Any) -> None:
         ),
     )
 
+    _add_check(hw_sub)
+
     campaign = hw_sub.add_parser(
         "campaign",
         help="many short rehearsals through hw run, each with random faults, invariants checked",
@@ -493,6 +497,162 @@ def add_commands(sub: Any) -> None:
         "--out", metavar="DIR", help="the results directory (default: runs/replay-<log name>)"
     )
     add_view_options(rep, "the session with the logged and the recomputed commands", live=False)
+
+
+def _add_check(hw_sub: Any) -> None:
+    check = hw_sub.add_parser(
+        "check",
+        help="commission the sensors before a session (about 45 s)",
+        description="Hold still, have the probe's tip pushed, tilt the tool through a few poses: "
+        "per sensor its rate, noise, drift, response to known loads, frame, linearity and "
+        "range; one line each and a JSON report; exit 1 (a session refused) when a sensor fails.",
+    )
+    check.add_argument("config", nargs="?", metavar="CONFIG.yaml", help="the rig's file")
+    check.add_argument(
+        "--rehearse", action="store_true", help="against the rehearsal world, not a robot"
+    )
+    check.add_argument(
+        "--probe-sensor",
+        metavar="fse103|loadcell|none",
+        help="the probe sensor (default: the rig file's; fse103 in a rehearsal)",
+    )
+    check.add_argument(
+        "--fault",
+        dest="planted",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="plant this fault in the rehearsal (hoh_cosim.rehearsal.planted): ft_sign_flipped, "
+        "ft_dead_channel, ft_rate_low, probe_frame_rotated, fse103_nonlinear_housing, "
+        "loadcell_saturated (repeatable; default: none, a healthy rig)",
+    )
+    check.add_argument(
+        "--seed", type=int, default=1, metavar="S", help="the rehearsal's seed (default: 1)"
+    )
+    check.add_argument(
+        "--repeat",
+        type=int,
+        default=0,
+        metavar="N",
+        help="rehearse N healthy checks (seeds S, S+1, ...) and every planted fault once, and "
+        "print the tally (default: 0, one check)",
+    )
+    check.add_argument(
+        "--override",
+        action="append",
+        default=[],
+        metavar="SENSOR",
+        help="allow a session although this sensor failed (ft150, fse103, loadcell; repeatable; "
+        "default: none)",
+    )
+    check.add_argument(
+        "--out", metavar="FILE", help="the JSON report (default: check-DATE.json in the log dir)"
+    )
+    check.add_argument(
+        "--ur-emulator",
+        metavar="HOST",
+        help="in a rehearsal, drive the arm through ur-rtde and the emulated UR controller here "
+        "(default: the world's arm through shared memory)",
+    )
+
+
+def _hw_check(args: argparse.Namespace) -> int:
+
+    from hoh_cosim.hardware.check import PROBE_SENSORS, SENSORS
+
+    if args.rehearse == (args.config is not None):
+        raise ConfigError("hw check: give CONFIG.yaml for a robot, or --rehearse, not both")
+    if args.probe_sensor is not None and args.probe_sensor not in PROBE_SENSORS:
+        raise ConfigError(
+            f"--probe-sensor: expected one of {', '.join(PROBE_SENSORS)}, got {args.probe_sensor!r}"
+        )
+    for name in args.override:
+        if name not in SENSORS:
+            raise ConfigError(f"--override: expected one of {', '.join(SENSORS)}, got {name!r}")
+    if args.repeat:
+        return _check_tally(args)
+    if args.rehearse:
+        from hoh_cosim.rehearsal.check import rehearse_check
+
+        if args.ur_emulator is not None and not _loopback(args.ur_emulator):
+            raise ConfigError(f"--ur-emulator: expected a loopback address, got {args.ur_emulator}")
+        out = Path(args.out) if args.out else Path("sessions") / f"check-{_stamp()}.json"
+        check_writable(out.parent, f"--out {out}")
+        outcome = rehearse_check(
+            args.probe_sensor or "fse103",
+            tuple(args.planted),
+            args.seed,
+            ur_host=args.ur_emulator,
+            announce=_announce,
+        )
+        verdicts, about = outcome.verdicts, outcome.about
+    else:
+        from hoh_cosim.hardware.config import load_config
+        from hoh_cosim.hardware.isolation import in_child
+
+        if args.planted:
+            raise ConfigError("--fault: a fault is planted only in a rehearsal (--rehearse)")
+        config = load_config(args.config)
+        out = Path(args.out) if args.out else config.log_dir / f"check-{_stamp()}.json"
+        check_writable(out.parent, f"--out {out}")
+        return in_child(lambda: _rig_check(config, args, out))
+    return _check_verdicts(verdicts, about, args.override, out)
+
+
+def _check_verdicts(verdicts: Any, about: dict, overrides: list[str], out: Path) -> int:
+    """Print a line per sensor, write the report, refuse a session on a failing sensor."""
+    from hoh_cosim.calibration import write_json_atomic
+    from hoh_cosim.hardware.check import report, session_refusal
+
+    refused = session_refusal(verdicts, overrides)
+    for verdict in verdicts:
+        overridden = " (overridden)" if not verdict.ok and verdict.sensor in overrides else ""
+        print(verdict.line() + overridden, flush=True)
+    write_json_atomic(out, report(verdicts, overrides, about))
+    print(f"wrote {out}")
+    if refused:
+        names = ", ".join(refused)
+        print(
+            f"hoh-cosim: session refused: {names} failed (--override {refused[0]} to run anyway)",
+            file=sys.stderr,
+            flush=True,
+        )
+        return 1
+    return 0
+
+
+def _rig_check(config: Any, args: argparse.Namespace, out: Path) -> int:
+    """`hw check` on the robot, in the child process of `in_child`."""
+    from hoh_cosim.hardware.check_run import check_on_rig
+
+    verdicts, about = check_on_rig(config, args.probe_sensor, announce=_announce)
+    return _check_verdicts(verdicts, about, args.override, out)
+
+
+def _check_tally(args: argparse.Namespace) -> int:
+    from hoh_cosim.calibration import write_json_atomic
+    from hoh_cosim.rehearsal.check import tally
+
+    if not args.rehearse:
+        raise ConfigError("--repeat: a tally runs in rehearsal only (add --rehearse)")
+    if args.repeat < 0 or args.planted:
+        raise ConfigError(
+            f"--repeat: expected N >= 1 healthy runs and no --fault, got {args.repeat}"
+        )
+    out = Path(args.out) if args.out else None
+    if out is not None:
+        check_writable(out.parent, f"--out {out}")
+    result = tally(
+        args.repeat,
+        args.seed,
+        args.probe_sensor or "fse103",
+        tell=lambda line: print(line, flush=True),
+    )
+    print(result.summary())
+    if out is not None:
+        write_json_atomic(out, {"summary": result.summary(), "runs": result.reports})
+        print(f"wrote {out}")
+    return 0 if result.ok else 1
 
 
 def _default_preset() -> str:
@@ -981,6 +1141,7 @@ def run_command(args: argparse.Namespace) -> int | None:
         "rehearse": _hw_rehearse,
         "emulate": _hw_emulate,
         "campaign": _hw_campaign,
+        "check": _hw_check,
     }
     if args.hw_command not in handlers:
         raise ConfigError("hw: expected a command: " + ", ".join(handlers))

@@ -15,6 +15,7 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -280,17 +281,16 @@ def _metadata(config: HardwareConfig, setup: WorldSetup) -> dict:
         "robot": config.robot.host,
         "period_s": 1.0 / setup.robot_rate_hz,
         "R_TS": config.robot.R_TS.tolist(),
-        "world": {
-            name: _plain(getattr(setup, name))
-            if name != "faults"
-            else [(f.at_s, f.kind) for f in setup.faults]
-            for name in (f.name for f in dataclasses.fields(setup))
-        },
+        "world": {f.name: _world_value(setup, f.name) for f in dataclasses.fields(setup)},
     }
 
 
-def _plain(value: object) -> object:
-    """A world setting as the log's metadata takes it (the load cell's parameters as a mapping)."""
+def _world_value(setup: WorldSetup, name: str) -> Any:
+    """A world parameter as the log's metadata keeps it: plain values, the faults as pairs, the
+    load cell's parameters and the planted faults as mappings."""
+    if name == "faults":
+        return [(f.at_s, f.kind) for f in setup.faults]
+    value = getattr(setup, name)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return dataclasses.asdict(value)
     return value

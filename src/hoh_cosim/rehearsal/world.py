@@ -43,6 +43,7 @@ from hoh_cosim.control.vectors import Vec
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.robot import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, Pacer, RobotState
 from hoh_cosim.rehearsal.faults import FAULTS, Fault
+from hoh_cosim.rehearsal.planted import Planted
 from hoh_cosim.rehearsal.priorities import HARDWARE_PRIORITY
 from plant_models.arm import ArmParams
 from plant_models.breathing import Breathing, BreathingParams
@@ -155,6 +156,9 @@ class WorldSetup:
     # zero_drift_N_per_min)
     probe_sensor: str = "fse103"
     loadcell: LoadCellParams = field(default_factory=LoadCellParams)
+    # sensor faults from the start, for `hw check --rehearse --fault` (rehearsal.planted)
+    planted: Planted = field(default_factory=Planted)
+    hand_seed: int | None = None  # the hand's draws (pushes, tremor) from it; None: its own
 
     def __post_init__(self) -> None:
         if self.probe_sensor not in PROBE_SENSORS:
@@ -252,7 +256,8 @@ class _World:
                 retake_s=setup.retake_s,
                 next_s=next_view,
                 probe_check_s=setup.probe_check_s,
-            )
+            ),
+            rng=None if setup.hand_seed is None else np.random.default_rng([setup.hand_seed, 2]),
         )
         self.breathing = (
             Breathing(
@@ -276,7 +281,7 @@ class _World:
         self.probe: FSE103Sensor | LoadCellSensor | None = None
         self.encode_line = encode_line
         if setup.probe_sensor == "fse103":
-            self.probe = FSE103Sensor(FSE103Params(), rng=rng)
+            self.probe = FSE103Sensor(setup.planted.fse103_params(FSE103Params()), rng=rng)
         elif setup.probe_sensor == "loadcell":
             self.probe = LoadCellSensor(setup.loadcell, rng=rng)
         # the 40 N of force_spike as a compression of the cell (along -z_L), on the FSE103's z
@@ -538,7 +543,7 @@ class _World:
         before = self.ft.clock.delivered
         ft = self.ft.step(t, WORLD_DT, {"wrench_S_true": self.outputs["wrench_S"]})
         if self.ft.clock.delivered != before:
-            values = ft["wrench_S"]
+            values = self.setup.planted.ft_values(ft["wrench_S"])
             if self.ft_spike:
                 values = values + np.array([0.0, 0.0, self.ft_spike, 0.0, 0.0, 0.0])
             if self.nan_next or self.ft_nan:
@@ -551,7 +556,8 @@ class _World:
         probe_sensor = self.probe
         assert probe_sensor is not None
         before = probe_sensor.clock.delivered
-        force = self.outputs["force_P"] + self.spike * self.spike_axis_P
+        force = self.setup.planted.probe_force(self.outputs["force_P"])
+        force = force + self.spike * self.spike_axis_P
         probe = probe_sensor.step(t, WORLD_DT, {"force_P_true": force})
         if probe_sensor.clock.delivered == before:
             return
