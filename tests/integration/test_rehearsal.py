@@ -602,6 +602,20 @@ def test_hw_rehearse_with_the_clinical_preset_checks_holds_recovers_and_gives_ba
             break
     assert status == 0, out
     assert "session ended: 40 s done" in out
+    if held_back:
+        # twice the machine held the emulated sensors back: the robot stopped for the stale data
+        # as it must, and only for it (the log whole); the modes' sequence needs a machine that
+        # keeps the sensors' streams, so it is not judged here, and the test says why
+        log = read_session(log_path)
+        assert log.complete
+        flags = {int(m["status"]) & int(STOP_FLAGS) for m in log.messages["/command"]} - {0}
+        assert all(f & ~stale == 0 for f in flags), flags
+        stops = [round(m["t"], 2) for m in log.messages["/command"] if int(m["status"]) & stale]
+        pytest.skip(
+            f"the machine held the emulated sensors back in both sessions (stale data for "
+            f"{len(stops) * 0.002:.2f} s of the second, from {stops[0]} s): the modes' sequence "
+            "is judged on a machine that keeps their streams"
+        )
     lines = out.splitlines()
     steps = (
         "probe check done",

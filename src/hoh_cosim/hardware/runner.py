@@ -348,7 +348,9 @@ class Runner:
         if probe_samples:
             probe_values = np.array([s.values for s in probe_samples])
             if not np.all(np.isfinite(probe_values)):
-                raise RunError(f"rebias refused: the {self.probe.describe()} sent non-finite values")
+                raise RunError(
+                    f"rebias refused: the {self.probe.describe()} sent non-finite values"
+                )
             probe_bias = probe_values.mean(axis=0)
         elif self.probe is not None:
             raise RunError(f"rebias: {self.probe.describe()} sent nothing while averaging")
