@@ -23,24 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
+from hoh_cosim.view.screenshot import HEADLESS_FLAGS
+
 __all__ = ["PAGES", "PLOT_BLUE", "check_screenshot", "take_screenshots"]
 
 PAGES = {"home": "", "first-cosimulation": "tutorials/first-cosimulation/"}
 """Screenshot name -> the page's path in the site."""
 PLOT_BLUE = (0x1F, 0x77, 0xB4)
 """The probe tip's line on the run's path plot (matplotlib's first colour)."""
-_FLAGS = (
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--hide-scrollbars",
-    "--window-size=1280,4000",
-)
+_FLAGS = (*HEADLESS_FLAGS, "--window-size=1280,4000")
 
 
 @contextlib.contextmanager

@@ -34,11 +34,18 @@ import numpy as np
 
 from hoh_cosim.errors import ConfigError, InputFileError, RunError
 
-__all__ = ["ARM_RGB", "CHROMIUM_FLAGS", "check_screenshot", "serve_recording", "take_screenshot"]
+__all__ = [
+    "ARM_RGB",
+    "CHROMIUM_FLAGS",
+    "HEADLESS_FLAGS",
+    "check_screenshot",
+    "serve_recording",
+    "take_screenshot",
+]
 
 ARM_RGB = (120, 150, 190)
 """The UR5's links in the view (`stream._ARM`)."""
-CHROMIUM_FLAGS = (
+HEADLESS_FLAGS = (
     "--headless",
     "--no-sandbox",
     "--disable-gpu",
@@ -48,6 +55,10 @@ CHROMIUM_FLAGS = (
     "--disable-component-update",
     "--disable-sync",
     "--hide-scrollbars",
+)
+"""Chromium headless on a closed network, as every screenshot here takes it (the docs' too)."""
+CHROMIUM_FLAGS = (
+    *HEADLESS_FLAGS,
     # WebGL without a GPU: ANGLE on SwiftShader, Chromium's software renderer
     "--use-angle=swiftshader",
     "--enable-unsafe-swiftshader",
