@@ -34,6 +34,7 @@ from hoh_cosim.hardware.log_check import invalid_messages
 from hoh_cosim.hardware.robot import Robot, RobotState
 from hoh_cosim.hardware.runner import Runner, SessionResult
 from hoh_cosim.hardware.session_log import Session, SessionLog, read_session
+from hoh_cosim.rehearsal.priorities import LOOP_PRIORITY
 from hoh_cosim.rehearsal.rehearse import rehearsal_config, truth_calibration
 from hoh_cosim.rehearsal.world import TASK_LEAD_S, Fault, RehearsalWorld, WorldSetup
 from plant_models.sensors import FT150Params
@@ -151,13 +152,16 @@ def test_a_clean_session_guides_the_robot_and_logs_every_cycle(tmp_path):
     p = outcome.log.series("/robot", "p_BT_B")
     assert np.ptp(p[:, 0]) > 0.01
     assert len(outcome.log.messages["/command"]) == result.cycles
-    events = [m["event"] for m in outcome.log.messages["/events"]]
+    # a busy machine that held a reader back at the rebias made its stream's rate look wrong: the
+    # rate measured again (seen in a warm suite beside the clinical study)
+    told = [m for m in outcome.log.messages["/events"] if m["event"] != "remeasure"]
+    events = [m["event"] for m in told]
     assert events[:3] == ["rebias", "parameters", "mode"]  # the mode: guiding once rebiased
     assert events[-1] == "end"
     # on a busy machine a stream's sample may come late: its stale flag stops the controller for
     # those cycles (a mode change into and out of stopped) and the runner logs the starved time
     # it did not count; nothing else happens in a clean session
-    between = outcome.log.messages["/events"][3:-1]
+    between = told[3:-1]
     assert {m["event"] for m in between} <= {"mode", "starved"}, events
     for m in between:
         if m["event"] == "mode":
@@ -487,7 +491,9 @@ def test_a_held_task_waits_for_start_task_however_long(tmp_path):
 
 def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):
     # the calibration's loop kicks the watchdog from this process, which shares the cores with the
-    # rest of the suite: 200 ms, as in run_session, so that only a real hang trips it
+    # rest of the suite: 200 ms, as in run_session, so that only a real hang trips it, and the loop
+    # at the rehearsal's real-time priority, as a rig's (seen at the default priority in a warm
+    # suite: the other worker's study starved it past the watchdog, and the program stopped)
     with RehearsalWorld(WorldSetup(task="off", watchdog_hz=5.0)) as world:
         params = SequencerParams(
             tilts=2,
@@ -505,6 +511,7 @@ def test_calibration_on_the_emulated_robot_finds_the_tool(tmp_path):
             params=params,
             samples=100,
             acceleration=2.0,
+            realtime_priority=LOOP_PRIORITY,
         )
         after = stopped_state(world.robot())
     truth = world.truth

@@ -135,7 +135,7 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_probe_sensor(parser: argparse.ArgumentParser, default: str) -> None:
-    from hoh_cosim.control.cycle import PROBE_SENSORS
+    from hoh_cosim.control.sensors import PROBE_SENSORS
 
     parser.add_argument(
         "--probe-sensor",
@@ -812,6 +812,7 @@ def _calibration(config: Any, params: Any, samples: int, out: Path) -> int:
         params=params,
         samples=samples,
         acceleration=config.robot.acceleration,
+        realtime_priority=config.robot.realtime_priority,
         announce=_announce,
     )
     poses = save(run, out)

@@ -27,6 +27,7 @@ from hoh_cosim.control.controller import ControllerParams, HandGuidingController
 from hoh_cosim.control.estimator import Estimator, EstimatorParams
 from hoh_cosim.control.guidance.modes import GUIDING, HOLD_MODES, Mode
 from hoh_cosim.control.hold import HoldEnd
+from hoh_cosim.control.sensors import PROBE_SENSORS
 from hoh_cosim.control.supervisor import SessionPolicy, Status, Verdict, supervise
 from hoh_cosim.control.vectors import Rot3, Vec, Vec3, as_scalar
 from hoh_cosim.errors import ConfigError
@@ -49,10 +50,6 @@ the mode it ended in (a contact's edge that flickers, a stale stream's gaps)."""
 FOLLOW_GAP_S = 4.0
 """[s] The follow's announcements are at least this far apart: about a breath (the follow's own
 `level_s`), which it may begin and end with."""
-
-PROBE_SENSORS = ("fse103", "loadcell", "none")
-"""The probe sensors a scenario (`probe_sensor`) and a rig (`probe.sensor`, `--probe-sensor`) may
-name: the Variense FSE103, the Honeywell Model 31 load cell, or none."""
 
 
 @dataclass(frozen=True)

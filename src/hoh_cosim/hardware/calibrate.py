@@ -107,6 +107,36 @@ def _average(
     return np.mean(values, axis=0), U @ Vt, len(values)
 
 
+def _poses(
+    cycles: _Cycles,
+    ft: Any,
+    R_TS: Rot3,
+    params: SequencerParams,
+    samples: int,
+    announce: Callable[[str], None],
+) -> tuple[list[Rot3], list[Vec], list[int]]:
+    """Each pose in turn, back to the start: the orientations, mean wrenches and sample counts."""
+    start = cycles.step(np.zeros(6))
+    p_start, R_start = start.p_BT_B.copy(), start.R_BT.copy()
+    targets = tilted_orientations(R_start, params)
+    rate = ft.mailbox.stats.rate_hz
+    hold_timeout = max(10.0, 3.0 * samples / rate) if np.isfinite(rate) else 60.0
+    R_list, wrench_list, counts = [], [], []
+    for i, R_target in enumerate(targets):
+        announce(f"pose {i + 1} of {len(targets)}")
+        _move(cycles, p_start, R_target, params, timeout_s=3.0 * params.move_s + 5.0)
+        settle_end = time.monotonic() + params.settle_s
+        while time.monotonic() < settle_end:
+            cycles.step(np.zeros(6))
+        mean, R_BS, n = _average(cycles, ft.mailbox, samples, R_TS, hold_timeout)
+        R_list.append(R_BS)
+        wrench_list.append(mean)
+        counts.append(n)
+    announce("back to the start")
+    _move(cycles, p_start, R_start, params, timeout_s=3.0 * params.move_s + 5.0)
+    return R_list, wrench_list, counts
+
+
 def calibrate(
     robot: Robot,
     ft: Any,
@@ -116,9 +146,15 @@ def calibrate(
     samples: int = 1000,
     acceleration: float = 1.0,
     g_B: Vec = GRAVITY_B,
+    realtime_priority: int | None = None,
     announce: Callable[[str], None] = lambda message: None,
 ) -> CalibrationRun:
-    """Drive the poses, average, identify. `ft` is a started-or-not FT-150 source."""
+    """Drive the poses, average, identify. `ft` is a started-or-not FT-150 source. The cycles
+    run as the runner's do (with `realtime_priority`, SCHED_FIFO for the loop and its readers),
+    since the robot's watchdog wants every one: a busy machine otherwise starves the loop past it
+    and the program on the robot stops."""
+    from hoh_cosim.hardware.runner import _realtime_interpreter
+
     params = params or SequencerParams()
     robot.connect()
     ft.start()
@@ -128,25 +164,11 @@ def calibrate(
             if time.monotonic() > deadline:
                 raise RunError(f"{ft.describe()}: no data within 5 s ({ft.mailbox.error})")
             time.sleep(0.01)
-        cycles = _Cycles(robot, acceleration)
-        start = cycles.step(np.zeros(6))
-        p_start, R_start = start.p_BT_B.copy(), start.R_BT.copy()
-        targets = tilted_orientations(R_start, params)
-        rate = ft.mailbox.stats.rate_hz
-        hold_timeout = max(10.0, 3.0 * samples / rate) if np.isfinite(rate) else 60.0
-        R_list, wrench_list, counts = [], [], []
-        for i, R_target in enumerate(targets):
-            announce(f"pose {i + 1} of {len(targets)}")
-            _move(cycles, p_start, R_target, params, timeout_s=3.0 * params.move_s + 5.0)
-            settle_end = time.monotonic() + params.settle_s
-            while time.monotonic() < settle_end:
-                cycles.step(np.zeros(6))
-            mean, R_BS, n = _average(cycles, ft.mailbox, samples, R_TS, hold_timeout)
-            R_list.append(R_BS)
-            wrench_list.append(mean)
-            counts.append(n)
-        announce("back to the start")
-        _move(cycles, p_start, R_start, params, timeout_s=3.0 * params.move_s + 5.0)
+        helpers = getattr(robot, "helper_thread_ids", ())
+        with _realtime_interpreter(realtime_priority, announce, helpers):
+            R_list, wrench_list, counts = _poses(
+                _Cycles(robot, acceleration), ft, R_TS, params, samples, announce
+            )
     finally:
         robot.stop()
         ft.stop()

@@ -28,16 +28,18 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from hoh_cosim.control.controller import ControllerParams
-from hoh_cosim.control.estimator import EstimatorParams
 from hoh_cosim.errors import ConfigError
 from hoh_cosim.params import from_mapping, leaves
 from hoh_cosim.yamlfile import Where, read_yaml
+
+if TYPE_CHECKING:
+    from hoh_cosim.control.controller import ControllerParams
+    from hoh_cosim.control.estimator import EstimatorParams
 
 __all__ = [
     "BLOCKS",
@@ -60,7 +62,34 @@ DEFAULT_PRESET = "seed"
 `--preset`: the seed's law, until the `clinical` preset meets the clinical targets on populations
 nobody tuned on (docs/decisions)."""
 
-BLOCKS: dict[str, type] = {"estimator": EstimatorParams, "controller": ControllerParams}
+
+class _Blocks(Mapping[str, type]):
+    """The blocks' names, and their parameter classes imported on first use: the command line's
+    parser names the presets without loading the controller and its compiled kernels."""
+
+    _NAMES = ("estimator", "controller")
+
+    def __getitem__(self, name: str) -> type:
+        if name not in self._NAMES:
+            raise KeyError(name)
+        return _block_classes()[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._NAMES)
+
+    def __len__(self) -> int:
+        return len(self._NAMES)
+
+
+@functools.cache
+def _block_classes() -> dict[str, type]:
+    from hoh_cosim.control.controller import ControllerParams
+    from hoh_cosim.control.estimator import EstimatorParams
+
+    return {"estimator": EstimatorParams, "controller": ControllerParams}
+
+
+BLOCKS: Mapping[str, type] = _Blocks()
 """The blocks a preset sets, by the name of their kind and section, and their parameters."""
 
 FIGURES = PRESETS_DIR / "figures.json"
