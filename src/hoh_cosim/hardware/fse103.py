@@ -406,10 +406,6 @@ class FSE103Port(SerialSource):
         """Ask the sensor to zero itself (the `z` command)."""
         self._send(COMMAND_ZERO)
 
-    def __enter__(self) -> FSE103Port:
-        self.start()
-        return self
-
     def _handle(self, data: bytes) -> None:
         frames = self._parser.feed(data)
         bad = self._parser.bad_frames

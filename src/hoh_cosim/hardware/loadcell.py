@@ -227,10 +227,6 @@ class LoadCellPort(SerialSource):
     def describe(self) -> str:
         return f"load cell on {self.device}"
 
-    def __enter__(self) -> LoadCellPort:
-        self.start()
-        return self
-
     def _handle(self, data: bytes) -> None:
         parser = self._parser
         lines = parser.feed(data)

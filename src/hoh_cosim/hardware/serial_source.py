@@ -12,13 +12,16 @@ from __future__ import annotations
 
 import contextlib
 import threading
-from typing import Any
+from typing import Any, TypeVar
 
 from hoh_cosim.control.vectors import as_scalar
 from hoh_cosim.errors import ConfigError, RunError
 from hoh_cosim.hardware.streams import Mailbox, ReaderThread
 
 __all__ = ["SerialSource"]
+
+
+_Source = TypeVar("_Source", bound="SerialSource")
 
 
 class SerialSource:
@@ -117,7 +120,7 @@ class SerialSource:
             except (serial.SerialException, OSError) as exc:
                 raise RunError(f"{self.describe()}: cannot send {command!r}: {exc}") from None
 
-    def __enter__(self) -> SerialSource:
+    def __enter__(self: _Source) -> _Source:
         self.start()
         return self
 
