@@ -26,6 +26,7 @@ from hoh_cosim.control.sequencer import SequencerParams, servo_twist, tilted_ori
 from hoh_cosim.control.vectors import GRAVITY_B, Rot3, Vec
 from hoh_cosim.errors import IdentificationError, RunError
 from hoh_cosim.hardware.robot import Robot, named_problem
+from hoh_cosim.hardware.runner import _realtime_interpreter
 from hoh_cosim.hardware.streams import Mailbox
 
 __all__ = ["CalibrationRun", "calibrate", "save"]
@@ -153,8 +154,6 @@ def calibrate(
     run as the runner's do (with `realtime_priority`, SCHED_FIFO for the loop and its readers),
     since the robot's watchdog wants every one: a busy machine otherwise starves the loop past it
     and the program on the robot stops."""
-    from hoh_cosim.hardware.runner import _realtime_interpreter
-
     params = params or SequencerParams()
     robot.connect()
     ft.start()
